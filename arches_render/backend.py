@@ -1,0 +1,135 @@
+"""Choose the Mitsuba variant and make sure Dr.Jit's LLVM backend can work.
+
+Dr.Jit's LLVM backend loads ``libLLVM`` at import time. LLVM 14 and 15 accept
+the library but crash later, while compiling a kernel, with
+``Cannot select: fminimum``; that takes the process down with a backtrace deep
+inside LLVM. We therefore
+
+1. point ``DRJIT_LIBLLVM_PATH`` at the newest libLLVM we can find (>= 16) when
+   the user has not chosen one, before ``drjit`` is imported, and
+2. read ``/proc/self/maps`` after the import to learn which libLLVM was really
+   loaded, and stop with :class:`BackendError` (a one-line message that says
+   how to install ``libllvm19``) when it is missing or too old.
+
+``cuda_ad_rgb`` is used when ``ARCHES_VARIANT`` asks for it or when it is the
+only variant that works; ``llvm_ad_rgb`` is the default everywhere.
+"""
+
+from __future__ import annotations
+
+import glob
+import os
+import re
+
+MIN_LLVM_MAJOR = 16
+INSTALL_HINT = (
+    "install a recent libLLVM (Debian/Ubuntu: 'sudo apt-get install libllvm19') "
+    "or set DRJIT_LIBLLVM_PATH to a libLLVM.so of version 16 or newer"
+)
+_LIB_DIRS = ("/usr/lib/x86_64-linux-gnu", "/usr/lib/aarch64-linux-gnu", "/usr/lib64", "/usr/lib",
+             "/usr/local/lib")
+
+_variant: str | None = None
+
+
+class BackendError(RuntimeError):
+    """The rendering backend cannot run on this machine (message is user-facing)."""
+
+
+def llvm_major_from_path(path: str) -> int | None:
+    """Major LLVM version encoded in a library file name.
+
+    Parameters
+    ----------
+    path : str
+        A path such as ``/usr/lib/x86_64-linux-gnu/libLLVM-15.so.1`` or
+        ``libLLVM.so.19.1``.
+
+    Returns
+    -------
+    int or None
+        The major version, or ``None`` when the name carries none.
+    """
+    name = os.path.basename(path)
+    m = re.match(r"libLLVM[-.]?(?:so\.)?(\d+)", name)
+    return int(m.group(1)) if m else None
+
+
+def find_newest_libllvm(dirs=_LIB_DIRS) -> str | None:
+    """Return the path of the newest ``libLLVM`` (major >= 16) in ``dirs``, if any."""
+    best: tuple[int, str] | None = None
+    for d in dirs:
+        for path in glob.glob(os.path.join(d, "libLLVM*.so*")):
+            major = llvm_major_from_path(path)
+            if major is not None and major >= MIN_LLVM_MAJOR and (best is None or major > best[0]):
+                best = (major, path)
+    return best[1] if best else None
+
+
+def loaded_libllvm() -> list[str]:
+    """Paths of the libLLVM libraries mapped into this process."""
+    try:
+        with open("/proc/self/maps") as f:
+            return sorted({line.split()[-1] for line in f if "libLLVM" in line})
+    except OSError:  # not Linux: nothing to inspect
+        return []
+
+
+def check_llvm(loaded: list[str]) -> None:
+    """Raise :class:`BackendError` unless ``loaded`` holds a usable libLLVM."""
+    if not loaded:
+        raise BackendError(f"Dr.Jit found no libLLVM on this machine: {INSTALL_HINT}.")
+    majors = [llvm_major_from_path(p) for p in loaded]
+    bad = [(p, m) for p, m in zip(loaded, majors) if m is not None and m < MIN_LLVM_MAJOR]
+    if bad:
+        path, major = bad[0]
+        raise BackendError(
+            f"Dr.Jit loaded LLVM {major} ({path}), which crashes with 'Cannot select fminimum': "
+            f"{INSTALL_HINT}.")
+
+
+def set_variant(name: str | None = None) -> str:
+    """Select the Mitsuba variant once per process and return its name.
+
+    Parameters
+    ----------
+    name : str, optional
+        ``'llvm_ad_rgb'`` or ``'cuda_ad_rgb'``; default: ``$ARCHES_VARIANT`` or
+        ``'llvm_ad_rgb'``.
+
+    Returns
+    -------
+    str
+        The active variant.
+
+    Raises
+    ------
+    BackendError
+        When the LLVM backend would crash (libLLVM missing or older than 16).
+    """
+    global _variant
+    name = name or os.environ.get("ARCHES_VARIANT", "llvm_ad_rgb")
+    if _variant == name:
+        return name
+    if name.startswith("llvm") and "DRJIT_LIBLLVM_PATH" not in os.environ:
+        newest = find_newest_libllvm()
+        if newest:
+            os.environ["DRJIT_LIBLLVM_PATH"] = newest
+    import drjit as dr  # noqa: F401  (loads libLLVM)
+    import mitsuba as mi
+
+    if name.startswith("llvm"):
+        check_llvm(loaded_libllvm())
+    if name not in mi.variants():
+        raise BackendError(f"Mitsuba variant '{name}' is not available; choose one of {mi.variants()}.")
+    mi.set_variant(name)
+    _variant = name
+    # Our Python plugins must be registered for every variant we switch to.
+    from . import plugins
+    plugins.register_all()
+    return name
+
+
+def variant() -> str:
+    """The active variant, selecting the default one on first use."""
+    return _variant or set_variant()

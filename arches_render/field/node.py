@@ -1,0 +1,206 @@
+"""The node protocol of the field language.
+
+A field ``f : R^3 -> R`` is positive inside matter, zero on the surface and negative
+in air (see :mod:`arches_render`). Every node of a construction tree answers three
+questions:
+
+``eval(p)``
+    ``f`` on a batch of points (``mi.Point3f``), as Dr.Jit code that can be traced
+    into any kernel: the sphere tracer's loop or a plain evaluation for generators.
+``bounds()``
+    an axis-aligned box outside of which ``f <= 0`` (no matter), as two numpy
+    3-vectors; infinite components are allowed for unbounded nodes (a plane).
+``lipschitz``
+    a guaranteed bound ``L`` with ``|f(a) - f(b)| <= L |a - b|`` for all ``a, b``,
+    derived from the math of the node and of its children, never measured from
+    samples (a measured bound can tunnel through thin features).
+``eval_bounds(p, levels)``
+    ``(f, ds)``: the value and, for each ``c`` in ``levels``, a *local* lower bound
+    ``d >= 0`` of the distance from ``p`` to the super-level set ``{f >= -c}``
+    (``c = 0``: the solid). The default is Hart's ``max(-f - c, 0) / L``; operators
+    compose their operands' bounds (a union is as far as its nearest operand, an
+    intersection as far as its farthest, a smooth blend is handled in
+    :mod:`~arches_render.field.operators`), so a ray far from a noisy feature is not
+    slowed by that feature's large ``L``. Every composition is a set inclusion,
+    hence as rigorous as the global bound. All levels are answered from one
+    evaluation of the node, so the kernel holds each node's code once.
+
+    With ``direction`` (a unit ``mi.Vector3f``), ``d`` may instead bound the
+    distance *along the ray* ``p + s direction`` (``s >= 0``) before it meets the
+    set: a ball free of the set is one such bound, and nodes that know better
+    (heightfields) return more. Such bounds look forward only, so a tracer that
+    over-relaxes its steps must not pass a direction.
+
+Parameters that may change between renders are held in opaque Dr.Jit arrays so
+that a new value does not recompile the kernel (Dr.Jit bakes Python floats into
+kernels as literals).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..backend import variant
+
+
+def opaque_float(value) -> "mi.Float":
+    """A scalar parameter as an opaque ``mi.Float`` (edited without recompiling)."""
+    import drjit as dr
+    import mitsuba as mi
+    return dr.opaque(mi.Float, float(value))
+
+
+def opaque_point(value) -> "mi.Point3f":
+    """A 3-vector parameter as an opaque ``mi.Point3f``."""
+    import drjit as dr
+    import mitsuba as mi
+    v = [float(x) for x in np.asarray(value, dtype=np.float64).reshape(3)]
+    return mi.Point3f(*(dr.opaque(mi.Float, x) for x in v))
+
+
+class Node:
+    """Base class of every field node.
+
+    Subclasses set ``self.children`` (a tuple of nodes), implement :meth:`eval`,
+    :meth:`bounds` and :attr:`lipschitz`, and may override :meth:`nbytes` when they
+    hold arrays.
+    """
+
+    #: Name used in scene files and by ``arches-render info``.
+    kind = "node"
+
+    children: tuple = ()
+
+    def eval(self, p):
+        """Field value at the points ``p`` (``mi.Point3f``) as ``mi.Float``."""
+        raise NotImplementedError
+
+    def eval_bounds(self, p, levels, direction=None):
+        """``(f, ds)``: value and lower bounds of the distances to ``{f >= -c}``, c in levels."""
+        f = self.eval(p)
+        return f, hart_bounds(f, levels, self.lipschitz)
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Axis-aligned box ``(lo, hi)`` containing every point where ``f > 0``."""
+        raise NotImplementedError
+
+    @property
+    def lipschitz(self) -> float:
+        """Guaranteed Lipschitz bound of :meth:`eval`."""
+        raise NotImplementedError
+
+    def nbytes(self) -> int:
+        """Memory held by this node alone (arrays and parameters), in bytes."""
+        return 64
+
+    #: Whether ``f(p) <= -dist(p, bounds())`` outside the box (true for exact
+    #: distances, heightfield prisms, Boolean and blend operators, displacements with
+    #: grown boxes, rigid and uniformly scaled transforms).
+    unit_falloff = True
+
+    @property
+    def cost(self) -> float:
+        """Relative evaluation cost (an exact primitive is 1); guides culling."""
+        return 1.0 + sum(c.cost for c in self.children)
+
+    # -- tree helpers --------------------------------------------------------------
+    def walk(self):
+        """Yield this node and all its descendants, depth first."""
+        yield self
+        for c in self.children:
+            yield from c.walk()
+
+    def count(self) -> int:
+        """Number of nodes in the tree rooted here (primitive sets count once)."""
+        return sum(1 for _ in self.walk())
+
+    def tree_nbytes(self) -> int:
+        """Memory of the whole tree rooted here, in bytes."""
+        return sum(n.nbytes() for n in self.walk())
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({', '.join(repr(c) for c in self.children)})"
+
+
+def hart_bounds(f, levels, lipschitz):
+    """Hart's bounds ``max(-f - c, 0) / L`` for each level ``c``."""
+    import drjit as dr
+    inv = 1.0 / lipschitz
+    return tuple(dr.maximum(-f - c, 0.0) * inv for c in levels)
+
+
+def box_union(boxes):
+    """Smallest box containing all ``(lo, hi)`` boxes."""
+    los, his = zip(*boxes)
+    return np.min(los, axis=0), np.max(his, axis=0)
+
+
+def box_intersection(boxes):
+    """Intersection of ``(lo, hi)`` boxes (may be empty: lo > hi)."""
+    los, his = zip(*boxes)
+    return np.max(los, axis=0), np.min(his, axis=0)
+
+
+def evaluate(node: Node, points: np.ndarray, batch: int = 1 << 20) -> np.ndarray:
+    """Evaluate a field on numpy points (the generators' entry point).
+
+    Parameters
+    ----------
+    node : Node
+        Root of the construction tree.
+    points : numpy.ndarray
+        ``(N, 3)`` array of positions.
+    batch : int
+        Points per Dr.Jit launch; bounds the memory of one evaluation.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(N,)`` float32 field values.
+    """
+    variant()
+    import drjit as dr
+    import mitsuba as mi
+    pts = np.ascontiguousarray(points, dtype=np.float32).reshape(-1, 3)
+    out = np.empty(len(pts), dtype=np.float32)
+    for s in range(0, len(pts), batch):
+        chunk = pts[s:s + batch]
+        p = mi.Point3f(mi.Float(chunk[:, 0]), mi.Float(chunk[:, 1]), mi.Float(chunk[:, 2]))
+        v = node.eval(p)
+        dr.eval(v)
+        out[s:s + len(chunk)] = v.numpy()
+    return out
+
+
+def gradient(node: Node, p, h: float | None = None, culled: bool = False):
+    """Field gradient at ``p`` by the tetrahedron technique (four evaluations).
+
+    Central differences with 4 taps along the vertices of a tetrahedron
+    ``k_i in {(1,-1,-1), (-1,-1,1), (-1,1,-1), (1,1,1)}``:
+    ``grad f ~= sum_i k_i f(p + h k_i) / (4 h)``.
+
+    Parameters
+    ----------
+    node : Node
+        The field.
+    p : mi.Point3f
+        Points (typically surface hits).
+    h : float or mi.Float
+        Step; default 1e-3 m.
+    culled : bool
+        Evaluate through ``eval_bounds`` so that culled subtrees are skipped (the
+        values agree near surfaces, see :mod:`arches_render.field.culling`).
+
+    Returns
+    -------
+    mi.Vector3f
+        Unnormalized gradient (points *into* matter, since f > 0 inside).
+    """
+    import mitsuba as mi
+    h = 1e-3 if h is None else h
+    g = mi.Vector3f(0.0)
+    for k in ((1, -1, -1), (-1, -1, 1), (-1, 1, -1), (1, 1, 1)):
+        kv = mi.Vector3f(*k)
+        q = p + kv * h
+        g += kv * (node.eval_bounds(q, ())[0] if culled else node.eval(q))
+    return g / (4.0 * h)

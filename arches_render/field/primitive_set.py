@@ -1,0 +1,160 @@
+"""Thousands of capsules (and spheres) as arrays behind a uniform grid.
+
+Unrolling a union of N primitives into the kernel makes JIT compilation explode
+(an unrolled tree of 300 nodes compiled 17x slower in a prototype). A
+:class:`CapsuleSet` instead stores the segments ``[a_i, b_i]`` and radii ``r_i`` in
+Dr.Jit arrays, and a grid of cells each listing the primitives whose box, grown by
+a margin ``m``, overlaps the cell. A point looks at its own cell only and returns
+
+    f(p) = max(-m, max_{i in cell(p)} (r_i - dist(p, [a_i, b_i]))).
+
+Why this is exact where it matters: a primitive missing from ``cell(p)`` lies
+farther than ``m`` from ``p``, so its exact distance field is ``<= -m`` there. Hence
+``f = max(-m, union)`` *everywhere* in the grid: the surface is exact, the field is
+1-Lipschitz and continuous, and it is merely clamped at ``-m`` far from matter
+(a sphere tracer then steps ``m`` at a time through empty cells). Outside the grid
+box (which contains every primitive grown by ``m``) ``f = -m - dist(p, box)``, which
+is below the true union field and joins it continuously at the box.
+
+Spheres are capsules with ``a = b``.
+
+References
+----------
+Amanatides, J., Woo, A. (1987). A fast voxel traversal algorithm for ray tracing.
+Eurographics '87 (uniform grids for ray queries).
+Paris, A. et al. (2019). Terrain amplification with implicit 3D features. ACM TOG
+38(5) (a grid/BVH over primitive boxes to accelerate large construction trees).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .node import Node, opaque_float
+
+
+def _grid_lists(lo_boxes, hi_boxes, grid_lo, cell, res):
+    """CSR lists of the primitives overlapping each cell (vectorized over primitives)."""
+    i0 = np.clip(np.floor((lo_boxes - grid_lo) / cell).astype(np.int64), 0, res - 1)
+    i1 = np.clip(np.floor((hi_boxes - grid_lo) / cell).astype(np.int64), 0, res - 1)
+    span = i1 - i0 + 1
+    counts = span.prod(axis=1)
+    prim = np.repeat(np.arange(len(lo_boxes)), counts)
+    # Enumerate each primitive's block of cells with a per-primitive local index.
+    local = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+    sx, sy = span[prim, 0], span[prim, 1]
+    cx = i0[prim, 0] + local % sx
+    cy = i0[prim, 1] + (local // sx) % sy
+    cz = i0[prim, 2] + local // (sx * sy)
+    cell_id = (cz * res[1] + cy) * res[0] + cx
+    order = np.argsort(cell_id, kind="stable")
+    n_cells = int(np.prod(res))
+    cell_count = np.bincount(cell_id, minlength=n_cells)
+    cell_start = np.concatenate([[0], np.cumsum(cell_count)[:-1]])
+    return cell_start.astype(np.uint32), cell_count.astype(np.uint32), prim[order].astype(np.uint32)
+
+
+class CapsuleSet(Node):
+    """Union of capsules ``(a_i, b_i, r_i)`` evaluated through a grid.
+
+    Parameters
+    ----------
+    a, b : array_like
+        ``(N, 3)`` segment end points (equal for spheres).
+    radius : array_like
+        ``(N,)`` radii, > 0.
+    cell_size : float, optional
+        Grid cell edge; default about twice the median primitive size.
+    margin : float, optional
+        The clamp ``m``; default one cell edge.
+    max_cells : int
+        Upper bound on the number of cells.
+    """
+
+    kind = "capsule_set"
+
+    def __init__(self, a, b, radius, cell_size=None, margin=None, max_cells=64 ** 3):
+        import mitsuba as mi
+        a = np.asarray(a, dtype=np.float64).reshape(-1, 3)
+        b = np.asarray(b, dtype=np.float64).reshape(-1, 3)
+        r = np.broadcast_to(np.asarray(radius, dtype=np.float64), (len(a),)).copy()
+        if len(a) == 0 or a.shape != b.shape:
+            raise ValueError("capsule_set needs matching, non-empty (N, 3) arrays a and b")
+        if not np.all(r > 0):
+            raise ValueError("capsule_set radii must be > 0")
+        self.n = len(a)
+        lo_p = np.minimum(a, b) - r[:, None]
+        hi_p = np.maximum(a, b) + r[:, None]
+        self.prim_lo, self.prim_hi = lo_p.min(axis=0), hi_p.max(axis=0)
+        size = float(np.median((hi_p - lo_p).max(axis=1)))
+        cell = float(cell_size) if cell_size else 2.0 * size
+        extent = self.prim_hi - self.prim_lo
+        # Keep the cell count bounded for sparse, large sets.
+        while np.prod(np.ceil((extent + 2 * cell) / cell) + 1) > max_cells:
+            cell *= 1.25
+        m = float(margin) if margin else cell
+        self.margin_np = m
+        grid_lo = self.prim_lo - m
+        res = np.maximum(np.ceil((self.prim_hi + m - grid_lo) / cell).astype(np.int64), 1)
+        self.grid_lo, self.cell, self.res = grid_lo, cell, res
+        self.grid_hi = grid_lo + res * cell
+        start, count, index = _grid_lists(lo_p - m, hi_p + m, grid_lo, cell, res)
+        self.max_per_cell = int(count.max())
+        self.list_len = len(index)
+        self._start, self._count, self._index = mi.UInt32(start), mi.UInt32(count), mi.UInt32(index)
+        f32 = lambda x: mi.Float(np.ascontiguousarray(x, dtype=np.float32))  # noqa: E731
+        self._ax, self._ay, self._az = f32(a[:, 0]), f32(a[:, 1]), f32(a[:, 2])
+        self._bx, self._by, self._bz = f32(b[:, 0]), f32(b[:, 1]), f32(b[:, 2])
+        self._r = f32(r)
+        self._m = opaque_float(m)
+        self._glo = [opaque_float(v) for v in grid_lo]
+        self._ghi = [opaque_float(v) for v in self.grid_hi]
+        self._inv_cell = opaque_float(1.0 / cell)
+        self.a_np, self.b_np, self.r_np = a, b, r
+
+    def eval(self, p):
+        import drjit as dr
+        import mitsuba as mi
+        rx, ry, rz = (int(v) for v in self.res)
+        ix = mi.UInt32(dr.clip((p.x - self._glo[0]) * self._inv_cell, 0.0, rx - 1.0))
+        iy = mi.UInt32(dr.clip((p.y - self._glo[1]) * self._inv_cell, 0.0, ry - 1.0))
+        iz = mi.UInt32(dr.clip((p.z - self._glo[2]) * self._inv_cell, 0.0, rz - 1.0))
+        cell = (iz * ry + iy) * rx + ix
+        start = dr.gather(mi.UInt32, self._start, cell)
+        count = dr.gather(mi.UInt32, self._count, cell)
+
+        def body(i, f):
+            k = dr.gather(mi.UInt32, self._index, start + i)
+            a = mi.Point3f(dr.gather(mi.Float, self._ax, k), dr.gather(mi.Float, self._ay, k),
+                           dr.gather(mi.Float, self._az, k))
+            ba = mi.Vector3f(dr.gather(mi.Float, self._bx, k), dr.gather(mi.Float, self._by, k),
+                             dr.gather(mi.Float, self._bz, k)) - a
+            pa = p - a
+            t = dr.clip(dr.dot(pa, ba) / dr.maximum(dr.squared_norm(ba), 1e-20), 0.0, 1.0)
+            d = dr.gather(mi.Float, self._r, k) - dr.norm(pa - ba * t)
+            return i + 1, dr.maximum(f, d)
+
+        _, inside = dr.while_loop((mi.UInt32(0), -self._m + mi.Float(0.0)),
+                                  lambda i, f: i < count, body, label="capsule_set")
+        q = mi.Vector3f(dr.maximum(dr.maximum(self._glo[0] - p.x, p.x - self._ghi[0]), 0.0),
+                        dr.maximum(dr.maximum(self._glo[1] - p.y, p.y - self._ghi[1]), 0.0),
+                        dr.maximum(dr.maximum(self._glo[2] - p.z, p.z - self._ghi[2]), 0.0))
+        outside = dr.norm(q)
+        return dr.select(outside > 0.0, -self._m - outside, inside)
+
+    def bounds(self):
+        return self.prim_lo.copy(), self.prim_hi.copy()
+
+    # Clamped at -m inside the grid: slower than unit rate beyond m from the box.
+    unit_falloff = False
+
+    @property
+    def cost(self):
+        return 3.0 + min(self.max_per_cell, 16)
+
+    @property
+    def lipschitz(self):
+        return 1.0
+
+    def nbytes(self):
+        return 64 + self.n * 7 * 4 + int(np.prod(self.res)) * 8 + self.list_len * 4

@@ -1,0 +1,186 @@
+"""``implicit_path``: a unidirectional path tracer for meshes *and* an implicit field.
+
+Each path vertex is the nearer of two hits: Mitsuba's ray query against the scene's
+shapes (``scene.ray_intersect``) and the sphere tracer against the field, limited
+to the mesh distance. Field hits get a hand-built ``SurfaceInteraction3f`` (position
+lifted off the surface by a small offset, normal ``-grad f / |grad f|``) and the
+field's BSDF, chosen per lane with ``BSDFPtr``.
+
+The estimator is the one of Mitsuba's ``path`` plugin: radiance
+
+    L = sum_k beta_k [ w_em L_e(sampled light) f cos / p_em  +  w_bsdf L_e(hit) ],
+
+with next-event estimation (shadow rays test meshes with ``scene.ray_test`` and the
+field with the sphere tracer), multiple importance sampling with the power
+heuristic between emitter and BSDF sampling, and Russian roulette from depth
+``rr_depth`` with continuation probability ``min(max(beta) eta^2, 0.95)``.
+
+Python cannot subclass ``mi.Shape`` (only meshes), so the field travels next to
+the scene: :meth:`ImplicitPathIntegrator.attach` gives it to the integrator after
+``mi.load_dict``.
+
+References
+----------
+Veach, E. (1997). Robust Monte Carlo methods for light transport simulation. PhD
+thesis, Stanford (MIS, power heuristic).
+Jakob, W. et al. (2022). Mitsuba 3 renderer, ``path`` integrator.
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from .sphere_tracer import SphereTracer
+
+
+def mis_weight(pdf_a, pdf_b):
+    """Power heuristic (beta = 2) weight of strategy ``a``."""
+    a2 = dr.square(pdf_a)
+    return dr.detach(dr.select(pdf_a > 0, a2 / dr.fma(pdf_b, pdf_b, a2), 0.0))
+
+
+class ImplicitPathIntegrator(mi.SamplingIntegrator):
+    """Path tracer for scenes holding meshes and one implicit field (see module doc).
+
+    Properties: ``max_depth`` (default 6, -1 = unbounded), ``rr_depth`` (5),
+    ``hide_emitters`` (false), ``eps`` (relative hit tolerance, 2e-4), ``omega``
+    (over-relaxation, 1.6), ``max_steps`` (512).
+    """
+
+    def __init__(self, props):
+        super().__init__(props)
+        max_depth = props.get("max_depth", 6)
+        self.max_depth = 0xFFFFFFFF if max_depth == -1 else int(max_depth)
+        self.rr_depth = int(props.get("rr_depth", 5))
+        self.hide_emitters = bool(props.get("hide_emitters", False))
+        self.eps = float(props.get("eps", 2e-4))
+        self.omega = float(props.get("omega", 1.6))
+        self.max_steps = int(props.get("max_steps", 512))
+        self.tracer = None
+        self.field_bsdf = None
+
+    def attach(self, field, bsdf):
+        """Give the integrator the field to sphere-trace and the BSDF that shades it."""
+        self.tracer = SphereTracer(field, eps=self.eps, omega=self.omega, max_steps=self.max_steps)
+        self.field_bsdf = bsdf
+
+    # -- ray queries ------------------------------------------------------------
+    def intersect(self, scene, ray, active):
+        """Nearest hit among meshes and the field; returns ``(si, is_field_hit)``."""
+        si = scene.ray_intersect(ray, mi.RayFlags.All, coherent=False, active=active)
+        if self.tracer is None:
+            return si, mi.Bool(False)
+        tmax = dr.select(si.is_valid(), si.t, ray.maxt)
+        hit, t = self.tracer.trace(ray.o, ray.d, tmax, active)
+        p = ray.o + ray.d * t
+        n = self.tracer.normal(p, t)
+        # Lift the point off the surface so that rays spawned here start in air.
+        offset = dr.maximum(1e-5 * self.tracer.scale, 2.0 * self.tracer.eps * t)
+        sf = dr.zeros(mi.SurfaceInteraction3f)
+        sf.t = t
+        sf.p = p + n * offset
+        sf.n = n
+        sf.sh_frame = mi.Frame3f(n)
+        sf.wi = sf.to_local(-ray.d)
+        sf.time = ray.time
+        sf.wavelengths = ray.wavelengths
+        si = dr.select(hit, sf, si)
+        return si, hit
+
+    def occluded(self, scene, ray, active):
+        """Shadow-ray test against meshes and the field."""
+        blocked = scene.ray_test(ray, active)
+        if self.tracer is not None:
+            hit, _ = self.tracer.trace(ray.o, ray.d, ray.maxt, active & ~blocked)
+            blocked |= hit
+        return blocked
+
+    def bsdf_at(self, si, ray, field_hit):
+        if self.tracer is None:
+            return si.bsdf(ray)
+        return dr.select(field_hit, mi.BSDFPtr(self.field_bsdf), si.bsdf(ray))
+
+    # -- estimator ---------------------------------------------------------------
+    def sample(self, scene, sampler, ray, medium=None, active=True):
+        bsdf_ctx = mi.BSDFContext()
+        ray = mi.Ray3f(ray)
+        L = mi.Spectrum(0.0)
+        beta = mi.Spectrum(1.0)
+        eta = mi.Float(1.0)
+        depth = mi.UInt32(0)
+        active = mi.Bool(active)
+        valid_ray = mi.Bool(False)
+        prev_si = dr.zeros(mi.SurfaceInteraction3f)
+        prev_bsdf_pdf = mi.Float(1.0)
+        prev_bsdf_delta = mi.Bool(True)
+
+        def cond(*state):
+            return state[-1]
+
+        def body(ray, L, beta, eta, depth, valid_ray, prev_si, prev_bsdf_pdf, prev_bsdf_delta, active):
+            si, field_hit = self.intersect(scene, ray, active)
+
+            # Emission reached by BSDF sampling (environment or area light), MIS-weighted.
+            ds = mi.DirectionSample3f(scene, si, prev_si)
+            em_pdf = mi.Float(0.0)
+            em_pdf[~prev_bsdf_delta] = scene.pdf_emitter_direction(prev_si, ds, ~prev_bsdf_delta)
+            visible_em = active
+            if self.hide_emitters:
+                visible_em &= ~((depth == 0) & ~si.is_valid())
+            Le = ds.emitter.eval(si, visible_em & (prev_bsdf_pdf > 0))
+            L = dr.select(visible_em, L + beta * mis_weight(prev_bsdf_pdf, em_pdf) * Le, L)
+
+            active_next = active & si.is_valid() & (depth + 1 < self.max_depth)
+            bsdf = self.bsdf_at(si, ray, field_hit)
+
+            # Next-event estimation.
+            active_em = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
+            ds, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), False, active_em)
+            active_em &= ds.pdf != 0.0
+            shadow = si.spawn_ray_to(ds.p)
+            shadow.maxt = dr.select(ds.delta | (ds.dist < dr.inf), shadow.maxt, dr.inf)
+            active_em &= ~self.occluded(scene, shadow, active_em)
+            wo = si.to_local(ds.d)
+            bsdf_val, bsdf_pdf = bsdf.eval_pdf(bsdf_ctx, si, wo, active_em)
+            mis_em = dr.select(ds.delta, 1.0, mis_weight(ds.pdf, bsdf_pdf))
+            L = dr.select(active_em, L + beta * mis_em * bsdf_val * em_weight, L)
+
+            # BSDF sampling.
+            bs, bsdf_weight = bsdf.sample(bsdf_ctx, si, sampler.next_1d(), sampler.next_2d(),
+                                          active_next)
+            valid_ray |= active & si.is_valid()
+            ray = si.spawn_ray(si.to_world(bs.wo))
+            beta *= bsdf_weight
+            eta *= bs.eta
+            prev_si = dr.detach(si)
+            prev_bsdf_pdf = bs.pdf
+            prev_bsdf_delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
+            depth[si.is_valid()] += 1
+
+            # Russian roulette.
+            beta_max = dr.max(beta)
+            active_next &= beta_max != 0.0
+            rr_prob = dr.minimum(beta_max * dr.square(eta), 0.95)
+            rr_active = depth >= self.rr_depth
+            beta[rr_active] *= dr.rcp(rr_prob)
+            rr_continue = sampler.next_1d() < rr_prob
+            active_next &= ~rr_active | rr_continue
+            return ray, L, beta, eta, depth, valid_ray, prev_si, prev_bsdf_pdf, prev_bsdf_delta, active_next
+
+        state = dr.while_loop((ray, L, beta, eta, depth, valid_ray, prev_si, prev_bsdf_pdf,
+                               prev_bsdf_delta, active), cond, body, label="implicit_path")
+        L, valid_ray = state[1], state[5]
+        return L, valid_ray, []
+
+    def aov_names(self):
+        return []
+
+    def to_string(self):
+        return (f"ImplicitPathIntegrator[max_depth={self.max_depth}, rr_depth={self.rr_depth}, "
+                f"field={'attached' if self.tracer else 'none'}]")
+
+
+def register() -> None:
+    """Register ``implicit_path`` with Mitsuba (idempotent)."""
+    mi.register_integrator("implicit_path", lambda props: ImplicitPathIntegrator(props))

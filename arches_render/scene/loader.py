@@ -1,0 +1,281 @@
+"""Scene files: TOML data validated into a :class:`SceneDescription`.
+
+A scene file is data, never code. Top-level tables:
+
+``[scene]``      ``name``, ``description``
+``[render]``     ``resolution = [w, h]``, ``spp``, ``passes``, ``seed``, ``max_depth``,
+                 ``rr_depth``, ``geometry = "field" | "mesh"``, ``voxel`` (mesh mode,
+                 metres), ``exposure`` (preview stops), ``eps``, ``omega``
+``[camera]``     ``origin``, ``target``, ``up`` (default +Z), ``fov`` (degrees, horizontal)
+``[[lights]]``   ``type`` = ``sunsky`` | ``directional`` | ``point`` | ``constant`` | ``envmap``
+``[materials.NAME]`` ``type = "triplanar"`` with ``preset`` and ``overrides``, or
+                 ``type = "diffuse"`` with ``color``
+``[[meshes]]``   ``file`` (PLY/OBJ) or ``shape`` (rectangle, disk, sphere, cube), a
+                 transform (``translate``, ``rotate = {axis, angle}``, ``scale``), ``material``
+``[field]``      ``root`` (node name or inline table), ``material``
+``[nodes.NAME]`` field nodes (see :mod:`arches_render.scene.nodes`)
+
+Paths are relative to the scene file. Errors name the file, the key path and the
+allowed range (:class:`~arches_render.scene.errors.SceneError`).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass, field as dc_field
+from pathlib import Path
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+from .errors import SceneError
+from .nodes import NodeBuilder
+from .validate import Table
+
+GEOMETRY_MODES = ("field", "mesh")
+
+
+@dataclass
+class RenderSettings:
+    width: int = 320
+    height: int = 180
+    spp: int = 16
+    passes: int = 0            # 0: choose from spp
+    seed: int = 0
+    max_depth: int = 6
+    rr_depth: int = 5
+    geometry: str = "field"
+    voxel: float = 0.0         # 0: choose from the field's bounds
+    exposure: float = 0.0
+    eps: float = 2e-4
+    omega: float = 1.6
+
+
+@dataclass
+class Camera:
+    origin: list
+    target: list
+    up: list
+    fov: float
+
+
+@dataclass
+class SceneDescription:
+    """A validated scene: plain data plus the built field tree."""
+
+    file: Path
+    name: str
+    description: str
+    render: RenderSettings
+    camera: Camera
+    lights: list = dc_field(default_factory=list)       # Mitsuba emitter dicts
+    materials: dict = dc_field(default_factory=dict)    # name -> Mitsuba BSDF dict
+    meshes: list = dc_field(default_factory=list)       # Mitsuba shape dicts
+    field: object = None                                # root Node or None
+    field_material: str | None = None
+
+
+def _sun_direction(t: Table):
+    """Direction *towards* the sun from elevation/azimuth (degrees; azimuth from +X to +Y)."""
+    el = math.radians(t.number("elevation", lo=-10, hi=90))
+    az = math.radians(t.number("azimuth", 0.0, lo=-360, hi=360))
+    return [math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)]
+
+
+def _rgb(t: Table, name, default):
+    v = t.raw(name, default)
+    if isinstance(v, (int, float)) and not isinstance(v, bool):
+        return {"type": "rgb", "value": [float(t.number(name, default, lo=0))] * 3}
+    return {"type": "rgb", "value": t.vector(name, 3, default=default, lo=0)}
+
+
+def _light(t: Table, base_dir: Path) -> dict:
+    kind = t.string("type", choices={"sunsky", "directional", "point", "constant", "envmap"})
+    if kind == "sunsky":
+        d = {"type": "sunsky", "sun_direction": _sun_direction(t),
+             "turbidity": t.number("turbidity", 3.0, lo=1.0, hi=10.0),
+             "sun_scale": t.number("sun_scale", 1.0, lo=0.0),
+             "sky_scale": t.number("sky_scale", 1.0, lo=0.0),
+             "albedo": t.number("ground_albedo", 0.3, lo=0.0, hi=1.0)}
+    elif kind == "directional":
+        direction = (t.vector("direction", nonzero=True) if t.has("direction")
+                     else [-c for c in _sun_direction(t)])
+        d = {"type": "directional", "direction": direction,
+             "irradiance": _rgb(t, "irradiance", 1.0)}
+    elif kind == "point":
+        d = {"type": "point", "position": t.vector("position"), "intensity": _rgb(t, "intensity", 1.0)}
+    elif kind == "constant":
+        d = {"type": "constant", "radiance": _rgb(t, "radiance", 1.0)}
+    else:
+        import mitsuba as mi
+        path = base_dir / t.string("file")
+        if not path.is_file():
+            raise t.error("file", f"no such file: {path}")
+        # Mitsuba's envmaps are Y-up; our world is Z-up.
+        d = {"type": "envmap", "filename": str(path), "scale": t.number("scale", 1.0, lo=0.0),
+             "to_world": mi.ScalarTransform4f().rotate([0, 0, 1], t.number("rotation", 0.0))
+             @ mi.ScalarTransform4f().rotate([1, 0, 0], 90.0)}
+    t.finish()
+    return d
+
+
+def _material(t: Table) -> dict:
+    kind = t.string("type", "triplanar", choices={"triplanar", "diffuse"})
+    if kind == "diffuse":
+        d = {"type": "diffuse", "reflectance": _rgb(t, "color", [0.5, 0.5, 0.5])}
+    else:
+        from ..materials import presets
+        name = t.string("preset", "terrain")
+        over = t.raw("overrides", {})
+        if not isinstance(over, dict):
+            raise t.error("overrides", "must be a table")
+        try:
+            d = presets.preset_dict(name, over)
+        except ValueError as exc:
+            raise t.error("overrides" if over else "preset", str(exc)) from None
+    t.finish()
+    return d
+
+
+def _mesh(t: Table, base_dir: Path, materials: dict) -> dict:
+    import mitsuba as mi
+    if t.has("file"):
+        path = base_dir / t.string("file")
+        if path.suffix.lower() not in (".ply", ".obj"):
+            raise t.error("file", f"must be a .ply or .obj mesh (got {path.name})")
+        if not path.is_file():
+            raise t.error("file", f"no such file: {path}")
+        d = {"type": path.suffix.lower()[1:], "filename": str(path)}
+    else:
+        d = {"type": t.string("shape", choices={"rectangle", "disk", "sphere", "cube"})}
+    xf = mi.ScalarTransform4f().translate(t.vector("translate", default=[0, 0, 0]))
+    rot = t.table("rotate", None)
+    if rot is not None:
+        xf = xf @ mi.ScalarTransform4f().rotate(rot.vector("axis", nonzero=True), rot.number("angle"))
+        rot.finish()
+    s = t.raw("scale", 1.0)
+    if isinstance(s, list):
+        xf = xf @ mi.ScalarTransform4f().scale(t.vector("scale", lo=1e-9))
+    else:
+        xf = xf @ mi.ScalarTransform4f().scale(t.number("scale", 1.0, lo=0, lo_open=True))
+    d["to_world"] = xf
+    mat = t.string("material", "default")
+    if mat not in materials:
+        raise t.error("material", f"unknown material '{mat}' (defined: {', '.join(sorted(materials))})")
+    d["bsdf"] = {"type": "ref", "id": mat}
+    t.finish()
+    return d
+
+
+def load_scene(path) -> SceneDescription:
+    """Read and validate a scene file.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.toml`` scene.
+
+    Returns
+    -------
+    SceneDescription
+
+    Raises
+    ------
+    SceneError
+        On unreadable files or invalid values (message names file, key, range).
+    """
+    path = Path(path)
+    try:
+        with open(path, "rb") as f:
+            data = tomllib.load(f)
+    except FileNotFoundError:
+        raise SceneError(path, "", "no such scene file") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(path, "", f"not valid TOML: {exc}") from None
+    except OSError as exc:
+        raise SceneError(path, "", f"cannot read: {exc.strerror}") from None
+    return parse_scene(data, path)
+
+
+def parse_scene(data: dict, path) -> SceneDescription:
+    """Validate already-parsed TOML data (see :func:`load_scene`)."""
+    path = Path(path)
+    base_dir = path.parent
+    root = Table(data, path)
+
+    meta = root.table("scene", {})
+    name = meta.string("name", path.stem)
+    description = meta.string("description", "")
+    meta.finish()
+
+    r = root.table("render", {})
+    res = r.raw("resolution", [320, 180])
+    if (not isinstance(res, list) or len(res) != 2
+            or not all(isinstance(v, int) and not isinstance(v, bool) and 1 <= v <= 16384 for v in res)):
+        raise r.error("resolution", f"must be [width, height] with integers in [1, 16384] (got {res!r})")
+    settings = RenderSettings(
+        width=res[0], height=res[1],
+        spp=r.integer("spp", 16, lo=1, hi=1 << 20),
+        passes=r.integer("passes", 0, lo=0, hi=4096),
+        seed=r.integer("seed", 0, lo=0, hi=2 ** 31 - 1),
+        max_depth=r.integer("max_depth", 6, lo=-1, hi=1024),
+        rr_depth=r.integer("rr_depth", 5, lo=1, hi=1024),
+        geometry=r.string("geometry", "field", choices=set(GEOMETRY_MODES)),
+        voxel=r.number("voxel", 0.0, lo=0.0),
+        exposure=r.number("exposure", 0.0, lo=-20, hi=20),
+        eps=r.number("eps", 2e-4, lo=1e-7, hi=1e-1),
+        omega=r.number("omega", 1.6, lo=1.0, hi=1.95))
+    if settings.max_depth == 0:
+        raise r.error("max_depth", "must be -1 (unbounded) or an integer in [1, 1024] (got 0)")
+    r.finish()
+
+    c = root.table("camera")
+    camera = Camera(origin=c.vector("origin"), target=c.vector("target"),
+                    up=c.vector("up", default=[0.0, 0.0, 1.0], nonzero=True),
+                    fov=c.number("fov", 40.0, lo=0, hi=180, lo_open=True, hi_open=True))
+    if camera.origin == camera.target:
+        raise c.error("target", "must differ from camera.origin")
+    c.finish()
+
+    lights = [_light(t, base_dir) for t in root.tables("lights")]
+    if not lights:
+        raise root.error("lights", "at least one light is required ([[lights]] with type = sunsky, ...)")
+
+    mats = root.table("materials", {})
+    materials = {"default": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.5] * 3}}}
+    for mname in list(mats.data):
+        materials[mname] = _material(mats.table(mname))
+    mats.finish()
+
+    meshes = [_mesh(t, base_dir, materials) for t in root.tables("meshes")]
+
+    field_node, field_material = None, None
+    nodes_tbl = root.raw("nodes", {})
+    if not isinstance(nodes_tbl, dict):
+        raise root.error("nodes", "must be a table of named node tables")
+    ft = root.table("field", None)
+    if ft is not None:
+        builder = NodeBuilder(nodes_tbl, path, base_dir)
+        field_node = builder.build(ft.raw("root"), ft, "root")
+        field_material = ft.string("material", "default")
+        if field_material not in materials:
+            raise ft.error("material", f"unknown material '{field_material}' "
+                                       f"(defined: {', '.join(sorted(materials))})")
+        lo, hi = field_node.bounds()
+        import numpy as np
+        if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+            raise ft.error("root", "the field is unbounded (a plane or noise at the root): "
+                                   "intersect it with a box")
+        ft.finish()
+        unused = sorted(set(nodes_tbl) - set(builder.built))
+        if unused:
+            raise SceneError(path, f"nodes.{unused[0]}", "is defined but never used by field.root")
+    if field_node is None and not meshes:
+        raise root.error("field", "the scene has no geometry: add [field] or [[meshes]]")
+    root.finish()
+    return SceneDescription(file=path, name=name, description=description, render=settings,
+                            camera=camera, lights=lights, materials=materials, meshes=meshes,
+                            field=field_node, field_material=field_material)

@@ -1,0 +1,178 @@
+"""Build field nodes from the ``[field]`` and ``[nodes.*]`` tables of a scene file.
+
+A node is a table with a ``type``; operands are given by ``child`` / ``children``,
+each either the name of a table under ``[nodes]`` or an inline table. Every node
+type, its keys and their ranges are listed in :data:`NODE_TYPES`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .. import field as F
+from .errors import SceneError
+from .validate import Table
+
+
+def _fbm_args(t: Table, amplitude=1.0, wavelength=1.0, octaves=4):
+    return dict(amplitude=t.number("amplitude", amplitude),
+                wavelength=t.number("wavelength", wavelength, lo=0, lo_open=True),
+                octaves=t.integer("octaves", octaves, lo=1, hi=12),
+                lacunarity=t.number("lacunarity", 2.0, lo=1.0, hi=4.0),
+                gain=t.number("gain", 0.5, lo=0.0, hi=1.0),
+                seed=t.integer("seed", 0, lo=0, hi=2 ** 32 - 1))
+
+
+def _load_heights(t: Table, base_dir: Path) -> np.ndarray:
+    path = base_dir / t.string("file")
+    if not path.is_file():
+        raise t.error("file", f"no such file: {path}")
+    try:
+        if path.suffix.lower() == ".npy":
+            H = np.load(path, allow_pickle=False).astype(np.float64)
+        elif path.suffix.lower() in (".png", ".tif", ".tiff"):
+            import imageio.v3 as iio
+            raw = iio.imread(path)
+            H = raw.astype(np.float64)
+            if H.ndim == 3:
+                H = H[..., 0]
+            H /= float(np.iinfo(raw.dtype).max) if np.issubdtype(raw.dtype, np.integer) else 1.0
+        else:
+            raise t.error("file", "must be a .npy, .png or .tif heightmap")
+    except SceneError:
+        raise
+    except Exception as exc:  # unreadable file: name it, no traceback
+        raise t.error("file", f"cannot read {path}: {exc}") from None
+    if H.ndim != 2 or min(H.shape) < 2:
+        raise t.error("file", f"must hold a 2-D array of at least 2x2 heights (got shape {H.shape})")
+    if not np.all(np.isfinite(H)):
+        raise t.error("file", "contains NaN or infinite heights")
+    return H * t.number("height_scale", 1.0) + t.number("height_offset", 0.0)
+
+
+def _heightfield(t: Table, ctx):
+    x0, y0, x1, y1 = t.vector("extent", 4)
+    if not (x1 > x0 and y1 > y0):
+        raise t.error("extent", f"must be [x0, y0, x1, y1] with x1 > x0 and y1 > y0 (got {[x0, y0, x1, y1]})")
+    base = t.number("base", None)
+    source = t.string("source", "fbm", choices={"fbm", "file"})
+    if source == "file":
+        H = _load_heights(t, ctx.base_dir)
+    else:
+        from ..generators.terrain.fbm_heightmap import fbm_heightmap
+        res = t.raw("resolution", [256, 256])
+        if (not isinstance(res, list) or len(res) != 2
+                or not all(isinstance(v, int) and 2 <= v <= 8192 for v in res)):
+            raise t.error("resolution", f"must be [nx, ny] with integers in [2, 8192] (got {res!r})")
+        H = fbm_heightmap((x0, y0, x1, y1), res, ridged=t.boolean("ridged", False),
+                          power=t.number("power", 1.0, lo=0.1, hi=8.0),
+                          offset=t.number("offset", 0.0),
+                          **_fbm_args(t, amplitude=30.0, wavelength=80.0, octaves=6))
+    return F.Heightfield(H, (x0, y0, x1, y1), base=base)
+
+
+def _children(t: Table, ctx, minimum):
+    items = t.raw("children")
+    if not isinstance(items, list) or len(items) < minimum:
+        raise t.error("children", f"must be an array of at least {minimum} node names or tables")
+    return [ctx.build(item, t, f"children[{i}]") for i, item in enumerate(items)]
+
+
+def _child(t: Table, ctx):
+    return ctx.build(t.raw("child"), t, "child")
+
+
+def _capsule_set(t: Table, ctx):
+    if t.has("file"):
+        path = ctx.base_dir / t.string("file")
+        try:
+            data = np.load(path, allow_pickle=False)
+            a, b, r = data["a"], data["b"], data["radius"]
+        except Exception as exc:
+            raise t.error("file", f"cannot read arrays a, b, radius from {path}: {exc}") from None
+    else:
+        a = np.asarray(t.raw("a"), dtype=np.float64)
+        b = np.asarray(t.raw("b", t.data.get("a")), dtype=np.float64)
+        r = np.asarray(t.raw("radius"), dtype=np.float64)
+    try:
+        return F.CapsuleSet(a, b, r)
+    except ValueError as exc:
+        raise t.error("a", str(exc)) from None
+
+
+NODE_TYPES = {
+    "sphere": lambda t, c: F.Sphere(t.vector("center"), t.number("radius", lo=0, lo_open=True)),
+    "box": lambda t, c: F.Box(t.vector("center"), np.asarray(t.vector("size", lo=0)) / 2,
+                              t.number("rounding", 0.0, lo=0.0)),
+    "capsule": lambda t, c: F.Capsule(t.vector("a"), t.vector("b"), t.number("radius", lo=0, lo_open=True)),
+    "plane": lambda t, c: F.Plane(t.vector("normal", nonzero=True), t.vector("point", default=[0, 0, 0])),
+    "heightfield": _heightfield,
+    "union": lambda t, c: F.Union(*_children(t, c, 1)),
+    "intersection": lambda t, c: F.Intersection(*_children(t, c, 1)),
+    "difference": lambda t, c: F.Difference(*_children(t, c, 2)),
+    "blend": lambda t, c: F.Blend(*_children(t, c, 1), radius=t.number("radius", lo=0, lo_open=True)),
+    "smooth_intersection": lambda t, c: F.SmoothIntersection(
+        *_children(t, c, 1), radius=t.number("radius", lo=0, lo_open=True)),
+    "translate": lambda t, c: F.Transform.translate(_child(t, c), t.vector("offset")),
+    "rotate": lambda t, c: F.Transform.rotate(_child(t, c), t.vector("axis", nonzero=True),
+                                              t.number("angle"), t.vector("pivot", default=[0, 0, 0])),
+    "scale": lambda t, c: F.Transform.scale(_child(t, c), _scale_factor(t),
+                                            t.vector("pivot", default=[0, 0, 0])),
+    "noise": lambda t, c: F.Noise(**_fbm_args(t)),
+    "displace": lambda t, c: F.Displace(_child(t, c), **_fbm_args(t)),
+    "warp": lambda t, c: F.DomainWarp(_child(t, c), **_fbm_args(t, octaves=3)),
+    "capsule_set": _capsule_set,
+}
+
+
+def _scale_factor(t: Table):
+    v = t.raw("factor")
+    if isinstance(v, (int, float)) and not isinstance(v, bool):
+        return t.number("factor", lo=0, lo_open=True)
+    return t.vector("factor", lo=1e-9)
+
+
+class NodeBuilder:
+    """Resolves node names and inline tables into field nodes, once each."""
+
+    def __init__(self, nodes_table: dict, file, base_dir: Path):
+        self.defs = nodes_table or {}
+        self.file = file
+        self.base_dir = base_dir
+        self.built: dict[str, F.Node] = {}
+        self.stack: list[str] = []
+
+    def build(self, item, parent: Table, key: str) -> F.Node:
+        if isinstance(item, str):
+            return self.named(item, parent, key)
+        if isinstance(item, dict):
+            return self.node(Table(item, self.file, parent.key(key)))
+        raise parent.error(key, f"must be a node name or an inline table (got {item!r})")
+
+    def named(self, name: str, parent: Table | None = None, key: str = "") -> F.Node:
+        if name in self.built:
+            return self.built[name]
+        if name not in self.defs:
+            known = ", ".join(sorted(self.defs)) or "none defined"
+            msg = f"refers to unknown node '{name}' (nodes: {known})"
+            raise parent.error(key, msg) if parent else SceneError(self.file, "field.root", msg)
+        if name in self.stack:
+            raise SceneError(self.file, f"nodes.{name}", f"is part of a cycle: {' -> '.join(self.stack + [name])}")
+        self.stack.append(name)
+        node = self.node(Table(self.defs[name], self.file, f"nodes.{name}"))
+        self.stack.pop()
+        self.built[name] = node
+        return node
+
+    def node(self, t: Table) -> F.Node:
+        kind = t.string("type", choices=set(NODE_TYPES))
+        try:
+            node = NODE_TYPES[kind](t, self)
+        except SceneError:
+            raise
+        except ValueError as exc:  # a constructor's own check: name the node
+            raise SceneError(self.file, t.path, str(exc)) from None
+        t.finish()
+        return node

@@ -1,0 +1,1 @@
+"""Terrain generators (heightmaps now; terrain amplification builds here next)."""

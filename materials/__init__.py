@@ -1,0 +1,1 @@
+"""Materials: the ``triplanar`` blended BSDF plugin, its presets and bundled textures."""

@@ -1,0 +1,602 @@
+"""The ``triplanar`` BSDF: layered, triplanar-textured Oren–Nayar terrain material.
+
+Terrains of arbitrary topology (arches, overhangs, caves) have no usable
+``(u, v)`` parameterisation, so every layer is textured by three axis-aligned
+projections blended by the shading normal (Peytavie et al. 2009, section 6,
+after Geiss 2007). Layers stack like paint: layer 0 is the base, each later
+layer covers what lies below it where its height, slope and field-mask rules
+hold.
+
+Shading model, per shading point ``p`` with normal ``n``:
+
+* projection weights ``b_k = |n_k|^s / sum_j |n_j|^s`` (``s = sharpness``),
+* layer texel ``T_i = sum_k b_k tex_i(uv_k / scale_i)`` with
+  ``uv_x = (p.y, p.z)``, ``uv_y = (p.x, p.z)``, ``uv_z = (p.x, p.y)``,
+* layer albedo ``a_i = clamp(tint_i T_i, 0, 1)``,
+* coverage ``c_i = coverage_i * H_i(p.z) * S_i(slope) * M_i(p)`` (``c_0 = 1``),
+  composite weight ``w_i = c_i prod_{j>i} (1 - c_j)``,
+* BRDF: the weighted sum of the layers' qualitative Oren–Nayar lobes.
+
+Parameters that change between renders live in opaque Dr.Jit arrays
+(editable through :func:`mitsuba.traverse`), so editing them re-uses the
+compiled kernels.
+
+References
+----------
+Peytavie A., Galin E., Grosjean J., Merillou S. (2009). Arches: a framework
+for modeling complex terrains. Computer Graphics Forum 28(2), 457–467.
+
+Oren M., Nayar S. K. (1994). Generalization of Lambert's reflectance model.
+Proceedings of SIGGRAPH 94, 239–246.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+__all__ = ["MAX_LAYERS", "TEXTURE_DIR", "Layer", "triplanar_dict", "triplanar_weights",
+           "composite_weights", "texture_path", "register", "TriplanarBSDF"]
+
+MAX_LAYERS = 8
+TEXTURE_DIR = Path(__file__).resolve().parent / "textures"
+OBJP_ATTRIBUTE = "vertex_objp"
+
+# Stand-in for an unbounded rule: finite so that ``bound - x`` never meets
+# ``inf - inf`` in the coverage ramps, yet far beyond any terrain.
+_UNBOUNDED = 1e30
+# Below this a soft width means a hard step; also keeps the ramps free of 0/0.
+_MIN_SOFT = 1e-6
+# Projections weaker than this skip their texture fetch (error < 0.01 %).
+_MIN_PROJECTION = 1e-4
+
+# Per-layer property suffixes and their defaults (the rule defaults always hold).
+_LAYER_FLOATS = {
+    "roughness": 0.0, "scale": 1.0,
+    "height_min": -math.inf, "height_max": math.inf, "height_soft": 0.0,
+    "slope_min": -math.inf, "slope_max": math.inf, "slope_soft": 0.0,
+    "coverage": 1.0,
+}
+_LAYER_OTHER = {"texture": "", "tint": (1.0, 1.0, 1.0), "srgb": True, "normalize": True,
+                "name": ""}
+_GLOBAL_PROPS = {"layer_count", "sharpness", "space"}
+_LAYER_KEY = re.compile(r"layer(\d+)_")
+_SPACES = ("world", "object")
+
+
+@dataclass
+class Layer:
+    """One paint layer of a :class:`TriplanarBSDF` (Python side of the flattened properties).
+
+    Parameters
+    ----------
+    texture : str
+        PNG file name inside ``materials/textures/`` or an absolute path;
+        ``''`` for a constant layer.
+    tint : tuple of 3 floats
+        Linear RGB multiplying the texture. With ``normalize`` it is the
+        layer's mean albedo.
+    roughness : float
+        Oren–Nayar ``sigma`` in radians, in ``[0, 1]``; 0 is Lambert.
+    scale : float
+        Metres per texture repeat (> 0).
+    height_min, height_max, height_soft : float
+        Full coverage for ``height_min <= p.z <= height_max``, fading to 0
+        over ``height_soft`` metres outside (smoothstep).
+    slope_min, slope_max, slope_soft : float
+        The same in degrees of the angle between ``n`` and ``+Z``.
+    coverage : float
+        Overall coverage multiplier in ``[0, 1]``.
+
+        The base layer (index 0) is always fully covered: its rules are ignored.
+    srgb : bool
+        Decode the texture from sRGB (colour); ``False`` for linear data.
+    normalize : bool
+        Divide the texture by its mean luminance, so ``tint`` sets the mean.
+    name : str
+        Label for presets, overrides and AOVs.
+    """
+
+    texture: str = ""
+    tint: tuple = (1.0, 1.0, 1.0)
+    roughness: float = 0.0
+    scale: float = 1.0
+    height_min: float = -math.inf
+    height_max: float = math.inf
+    height_soft: float = 0.0
+    slope_min: float = -math.inf
+    slope_max: float = math.inf
+    slope_soft: float = 0.0
+    coverage: float = 1.0
+    srgb: bool = True
+    normalize: bool = True
+    name: str = ""
+
+    def __post_init__(self):
+        self.tint = tuple(float(c) for c in self.tint)
+        if len(self.tint) != 3:
+            raise ValueError(f"Layer '{self.name}': tint needs 3 values, got {len(self.tint)}")
+        for key in _LAYER_FLOATS:
+            setattr(self, key, float(getattr(self, key)))
+        _check_layer_values(self.name or "?", self.roughness, self.scale, self.coverage,
+                            self.height_soft, self.slope_soft)
+
+
+def _check_layer_values(label, roughness, scale, coverage, height_soft, slope_soft):
+    if not 0.0 <= roughness <= 1.0:
+        raise ValueError(f"layer {label}: roughness {roughness} is outside [0, 1]")
+    if not scale > 0.0:
+        raise ValueError(f"layer {label}: scale {scale} must be > 0 (metres per repeat)")
+    if not 0.0 <= coverage <= 1.0:
+        raise ValueError(f"layer {label}: coverage {coverage} is outside [0, 1]")
+    if height_soft < 0.0 or slope_soft < 0.0:
+        raise ValueError(f"layer {label}: height_soft/slope_soft must be >= 0")
+
+
+def triplanar_dict(layers, sharpness: float = 8.0, space: str = "world") -> dict:
+    """Flattened plugin dictionary of a triplanar material for :func:`mitsuba.load_dict`.
+
+    Parameters
+    ----------
+    layers : sequence of Layer
+        Bottom (base) layer first; at most :data:`MAX_LAYERS`.
+    sharpness : float
+        Exponent of the projection blend (8 in the Arches paper).
+    space : str
+        ``'world'`` or ``'object'`` (positions from the ``vertex_objp`` mesh attribute).
+
+    Returns
+    -------
+    dict
+        ``{'type': 'triplanar', 'layer_count': n, 'layer0_tint': [...], ...}``.
+
+    Raises
+    ------
+    ValueError
+        On an empty or too long layer list or an unknown space.
+    """
+    layers = list(layers)
+    if not 1 <= len(layers) <= MAX_LAYERS:
+        raise ValueError(f"triplanar: {len(layers)} layers given, allowed 1..{MAX_LAYERS}")
+    if space not in _SPACES:
+        raise ValueError(f"triplanar: unknown space '{space}', allowed: {', '.join(_SPACES)}")
+    d = {"type": "triplanar", "layer_count": len(layers), "sharpness": float(sharpness),
+         "space": space}
+    for i, layer in enumerate(layers):
+        for f in fields(Layer):
+            value = getattr(layer, f.name)
+            d[f"layer{i}_{f.name}"] = list(value) if f.name == "tint" else value
+    return d
+
+
+def triplanar_weights(n, sharpness):
+    """Projection blend weights of the three axis projections.
+
+    Parameters
+    ----------
+    n : mi.Vector3f
+        Unit shading normal.
+    sharpness : mi.Float or float
+        Blend exponent ``s >= 1``.
+
+    Returns
+    -------
+    mi.Vector3f
+        ``(b_x, b_y, b_z)`` with ``b_k = |n_k|^s / sum_j |n_j|^s``.
+
+    References
+    ----------
+    Peytavie et al. (2009), section 6, "Texturing terrains of arbitrary geometry".
+    """
+    a = dr.abs(mi.Vector3f(n))
+    # Dividing by the largest component first keeps a^s away from underflow
+    # for large exponents (the largest term becomes exactly 1).
+    a = a / dr.maximum(dr.max(a), 1e-20)
+    a = dr.power(a, sharpness)
+    return a / (a.x + a.y + a.z)
+
+
+def composite_weights(coverages):
+    """Paint-style compositing weights of stacked layers.
+
+    Parameters
+    ----------
+    coverages : list of mi.Float
+        Coverage ``c_i`` of each layer, bottom first; ``c_0`` is taken as 1.
+
+    Returns
+    -------
+    list of mi.Float
+        ``w_i = c_i prod_{j>i} (1 - c_j)``; they sum to 1.
+    """
+    weights = [None] * len(coverages)
+    uncovered = mi.Float(1.0)
+    for i in range(len(coverages) - 1, 0, -1):
+        weights[i] = coverages[i] * uncovered
+        uncovered = uncovered * (1.0 - coverages[i])
+    weights[0] = uncovered
+    return weights
+
+
+def texture_path(name: str) -> Path:
+    """Resolve a layer texture name.
+
+    Parameters
+    ----------
+    name : str
+        File name inside :data:`TEXTURE_DIR` or an absolute path.
+
+    Returns
+    -------
+    pathlib.Path
+
+    Raises
+    ------
+    ValueError
+        When the file does not exist (the message lists the bundled textures).
+    """
+    path = Path(name)
+    if not path.is_absolute():
+        path = TEXTURE_DIR / name
+    if not path.is_file():
+        bundled = sorted(p.name for p in TEXTURE_DIR.glob("*.png"))
+        raise ValueError(f"triplanar: texture '{name}' not found; bundled textures: "
+                         f"{', '.join(bundled)} (or give an absolute path)")
+    return path
+
+
+_TEXTURES: dict = {}
+
+
+def _load_texture(name: str, srgb: bool, normalize: bool):
+    """The texture of a layer, loaded once per (variant, file, decoding)."""
+    path = texture_path(name)
+    key = (mi.variant(), str(path), bool(srgb), bool(normalize))
+    if key in _TEXTURES:
+        return _TEXTURES[key]
+    bmp = mi.Bitmap(str(path))
+    grey = bmp.pixel_format() in (mi.Bitmap.PixelFormat.Y, mi.Bitmap.PixelFormat.YA)
+    if not srgb:
+        # Data textures: take the stored numbers as they are.
+        bmp.set_srgb_gamma(False)
+    bmp = bmp.convert(mi.Bitmap.PixelFormat.Y if grey else mi.Bitmap.PixelFormat.RGB,
+                      mi.Struct.Type.Float32, srgb_gamma=False)
+    arr = np.array(bmp, dtype=np.float32).reshape(bmp.height(), bmp.width(), -1)
+    # Image rows run downwards; flip so that +v (world +Z on the side
+    # projections) shows the image upright on cliffs.
+    arr = np.ascontiguousarray(arr[::-1])
+    if normalize:
+        lum = arr[..., 0] if grey else arr @ np.array([0.2126, 0.7152, 0.0722], np.float32)
+        arr = arr / max(float(lum.mean()), 1e-6)
+    if arr.shape[2] == 3 and mi.variant().startswith("cuda"):
+        # Hardware textures take 1, 2 or 4 channels.
+        arr = np.concatenate([arr, np.ones_like(arr[..., :1])], axis=2)
+    tex = mi.Texture2f(mi.TensorXf(arr), use_accel=True, filter_mode=dr.FilterMode.Linear,
+                       wrap_mode=dr.WrapMode.Repeat)
+    _TEXTURES[key] = tex
+    return tex
+
+
+def _smoothstep01(t):
+    t = dr.clip(t, 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+def _band(x, lo, hi, soft):
+    """1 on ``[lo, hi]``, smoothstep fall-off to 0 over ``soft`` outside."""
+    inv = dr.rcp(dr.maximum(soft, _MIN_SOFT))
+    return _smoothstep01((x - lo) * inv + 1.0) * _smoothstep01((hi - x) * inv + 1.0)
+
+
+def _finite(x: float) -> float:
+    return float(min(max(x, -_UNBOUNDED), _UNBOUNDED))
+
+
+def _colour(value, key):
+    try:
+        c = [float(v) for v in value]
+    except TypeError:
+        c = [float(value)] * 3
+    if len(c) != 3:
+        raise ValueError(f"triplanar: {key} needs 3 values, got {len(c)}")
+    return c
+
+
+def _opaque(value, kind):
+    v = kind(value)
+    dr.make_opaque(v)
+    return v
+
+
+def _object_position(shape, si):
+    """Per-shape body of the ``vertex_objp`` lookup (run through ``dr.dispatch``)."""
+    try:
+        found = shape.has_attribute(OBJP_ATTRIBUTE)
+        return mi.Point3f(shape.eval_attribute_3(OBJP_ATTRIBUTE, si)), mi.Bool(found)
+    except Exception:  # shapes other than meshes, or meshes without the attribute
+        return mi.Point3f(0.0), mi.Bool(False)
+
+
+class _TriplanarImpl:
+    """Variant-independent body of :class:`TriplanarBSDF` (see the module docstring)."""
+
+    def __init__(self, props):
+        mi.BSDF.__init__(self, props)
+        names = set(props.keys())
+        # Without layer_count, the highest layer index named decides.
+        indices = [int(m.group(1)) for m in map(_LAYER_KEY.match, names) if m]
+        count = int(props.get("layer_count", 1 + max(indices, default=0)))
+        if not 1 <= count <= MAX_LAYERS:
+            raise ValueError(f"triplanar: layer_count {count} is outside 1..{MAX_LAYERS}")
+        allowed = set(_GLOBAL_PROPS) | {f"layer{i}_{k}" for i in range(count)
+                                        for k in (*_LAYER_FLOATS, *_LAYER_OTHER)}
+        unknown = sorted(names - allowed)
+        if unknown:
+            raise ValueError(f"triplanar: unknown properties {unknown}; per layer i < {count}: "
+                             f"layer{{i}}_{{{', '.join((*_LAYER_FLOATS, *_LAYER_OTHER))}}}, "
+                             f"global: {', '.join(sorted(_GLOBAL_PROPS))}")
+        self.space = str(props.get("space", "world"))
+        if self.space not in _SPACES:
+            raise ValueError(f"triplanar: unknown space '{self.space}', allowed: "
+                             f"{', '.join(_SPACES)}")
+        self.sharpness = _opaque(float(props.get("sharpness", 8.0)), mi.Float)
+        self.layer_count = count
+        self.names, self.textures, self.tint, self.masks = [], [], [], [None] * count
+        self.params = {k: [] for k in _LAYER_FLOATS}
+        for i in range(count):
+            get = lambda k, d: props.get(f"layer{i}_{k}", d)  # noqa: E731
+            vals = {k: float(get(k, d)) for k, d in _LAYER_FLOATS.items()}
+            _check_layer_values(i, vals["roughness"], vals["scale"], vals["coverage"],
+                                vals["height_soft"], vals["slope_soft"])
+            for k, v in vals.items():
+                self.params[k].append(_opaque(_finite(v), mi.Float))
+            self.tint.append(_opaque(_colour(get("tint", (1.0, 1.0, 1.0)), f"layer{i}_tint"),
+                                     mi.Color3f))
+            name, srgb, norm = str(get("texture", "")), get("srgb", True), get("normalize", True)
+            self.textures.append(_load_texture(name, bool(srgb), bool(norm)) if name else None)
+            self.names.append(str(get("name", "")) or f"layer{i}")
+        self.m_flags = mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
+        self.m_components = [self.m_flags]
+
+    # ----------------------------------------------------------------- public
+    def set_layer_mask(self, i: int, node, lo: float = 0.0, hi: float = 1.0) -> None:
+        """Multiply layer ``i``'s coverage by ``smoothstep(lo, hi, node.eval(p))``.
+
+        Parameters
+        ----------
+        i : int
+            Layer index, ``1 <= i < layer_count`` (layer 0 is always covered).
+        node : object or None
+            Anything with ``eval(p: mi.Point3f) -> mi.Float`` (a field node,
+            a noise); ``None`` removes the mask. ``p`` is the shading position
+            (object space when ``space == 'object'``).
+        lo, hi : float
+            Field values mapped to coverage 0 and 1 (``hi < lo`` inverts).
+
+        Notes
+        -----
+        A new node changes the kernel code, so the next render compiles;
+        ``lo``/``hi`` are opaque (keys ``layer{i}_mask_lo``/``_hi``).
+        """
+        if not 1 <= i < self.layer_count:
+            raise ValueError(f"triplanar: mask layer {i} is outside 1..{self.layer_count - 1} "
+                             "(layer 0, the base, is always fully covered)")
+        self.masks[i] = None if node is None else (
+            node, _opaque(float(lo), mi.Float), _opaque(float(hi), mi.Float))
+
+    def position(self, si, active=True):
+        """Shading position: ``si.p``, or ``vertex_objp`` in object space where a mesh has it.
+
+        Parameters
+        ----------
+        si : mi.SurfaceInteraction3f
+        active : mi.Bool
+
+        Returns
+        -------
+        mi.Point3f
+        """
+        if self.space != "object":
+            return mi.Point3f(si.p)
+        objp, found = dr.dispatch(si.shape, _object_position, si)
+        return dr.select(mi.Bool(active) & found, objp, si.p)
+
+    def layer_weights(self, si, active=True):
+        """Composite weight of every layer at ``si`` (they sum to 1).
+
+        Parameters
+        ----------
+        si : mi.SurfaceInteraction3f
+            Needs ``p``, ``sh_frame`` (and ``shape``/``prim_index`` in object space).
+        active : mi.Bool
+
+        Returns
+        -------
+        list of mi.Float
+        """
+        return self._weights(si, self.position(si, active), active)
+
+    def albedo(self, si, active=True):
+        """Blended diffuse albedo ``sum_i w_i a_i`` at ``si`` (linear RGB).
+
+        Parameters
+        ----------
+        si : mi.SurfaceInteraction3f
+        active : mi.Bool
+
+        Returns
+        -------
+        mi.Color3f
+        """
+        return self._lobes(si, active)[0]
+
+    # ------------------------------------------------------------ internals
+    def _weights(self, si, p, active):
+        n = si.sh_frame.n
+        slope = dr.acos(dr.clip(n.z, -1.0, 1.0)) * (180.0 / dr.pi)
+        cov = [None]
+        P = self.params
+        for i in range(1, self.layer_count):
+            c = P["coverage"][i] * _band(p.z, P["height_min"][i], P["height_max"][i],
+                                         P["height_soft"][i]) \
+                * _band(slope, P["slope_min"][i], P["slope_max"][i], P["slope_soft"][i])
+            if self.masks[i] is not None:
+                node, lo, hi = self.masks[i]
+                span = hi - lo
+                t = (mi.Float(node.eval(mi.Point3f(p))) - lo) / dr.select(span == 0.0, 1e-20, span)
+                c = c * _smoothstep01(t)
+            cov.append(dr.clip(c, 0.0, 1.0))
+        return composite_weights(cov)
+
+    def _texel(self, i, p, b, active):
+        """Triplanar texture value of layer ``i`` (a Color3f, 1 where untextured)."""
+        tex = self.textures[i]
+        if tex is None:
+            return mi.Color3f(1.0)
+        inv = dr.rcp(self.params["scale"][i])
+        out = mi.Color3f(0.0)
+        for k, uv in enumerate(((p.y, p.z), (p.x, p.z), (p.x, p.y))):
+            on = active & (b[k] > _MIN_PROJECTION)
+            v = tex.eval(mi.Point2f(uv[0] * inv, uv[1] * inv), on)
+            c = mi.Color3f(v[0], v[1], v[2]) if len(v) >= 3 else mi.Color3f(v[0])
+            out += dr.select(on, b[k], 0.0) * c
+        return out
+
+    def _lobes(self, si, active):
+        """Albedo and the two Oren–Nayar colour terms ``sum w a A``, ``sum w a B``."""
+        active = mi.Bool(active)
+        p = self.position(si, active)
+        w = self._weights(si, p, active)
+        b = triplanar_weights(si.sh_frame.n, self.sharpness)
+        albedo, ca, cb = mi.Color3f(0.0), mi.Color3f(0.0), mi.Color3f(0.0)
+        for i in range(self.layer_count):
+            on = active & (w[i] > 0.0)
+            a = dr.clip(self.tint[i] * self._texel(i, p, b, on), 0.0, 1.0) * w[i]
+            s2 = dr.square(dr.clip(self.params["roughness"][i], 0.0, 1.0))
+            one_minus_a = 0.5 * s2 / (s2 + 0.33)
+            # The directional albedo is A + B G(theta_i) with G < 1/2 (G -> 1/2
+            # at grazing), so for sigma < 0.35 the qualitative model reflects
+            # more than the albedo near grazing; capping B at 2 (1 - A) keeps
+            # the energy <= albedo and leaves rougher layers untouched.
+            b_term = dr.minimum(0.45 * s2 / (s2 + 0.09), 2.0 * one_minus_a)
+            albedo += a
+            ca += a * (1.0 - one_minus_a)
+            cb += a * b_term
+        return albedo, ca, cb
+
+    def _brdf_cos(self, si, wo, active):
+        """``f * cos(theta_o) * pi`` (the cosine-sampling weight) and the validity mask."""
+        cos_i, cos_o = mi.Frame3f.cos_theta(si.wi), mi.Frame3f.cos_theta(wo)
+        valid = mi.Bool(active) & (cos_i > 0.0) & (cos_o > 0.0)
+        _, ca, cb = self._lobes(si, valid)
+        # sin(a) tan(b) max(0, cos(dphi)) written without trigonometry:
+        # dot(wi, wo) - cos_i cos_o = sin_i sin_o cos(dphi).
+        s = dr.dot(si.wi, wo) - cos_i * cos_o
+        g = dr.maximum(s, 0.0) / dr.maximum(dr.maximum(cos_i, cos_o), 1e-8)
+        return dr.select(valid, ca + cb * g, 0.0), valid
+
+    # ---------------------------------------------------------- BSDF interface
+    def sample(self, ctx, si, sample1, sample2, active=True):
+        """Cosine-hemisphere sample; the weight is ``eval / pdf``."""
+        bs = dr.zeros(mi.BSDFSample3f)
+        if not ctx.is_enabled(mi.BSDFFlags.DiffuseReflection):
+            return bs, mi.Color3f(0.0)
+        wo = mi.warp.square_to_cosine_hemisphere(sample2)
+        weight, valid = self._brdf_cos(si, wo, active)
+        bs.wo = wo
+        bs.pdf = dr.select(valid, mi.warp.square_to_cosine_hemisphere_pdf(wo), 0.0)
+        bs.eta = 1.0
+        bs.sampled_type = mi.UInt32(+mi.BSDFFlags.DiffuseReflection)
+        bs.sampled_component = mi.UInt32(0)
+        return bs, weight
+
+    def eval(self, ctx, si, wo, active=True):
+        """BRDF times ``cos(theta_o)``; zero below the surface on either side."""
+        if not ctx.is_enabled(mi.BSDFFlags.DiffuseReflection):
+            return mi.Color3f(0.0)
+        value, _ = self._brdf_cos(si, wo, active)
+        return value * dr.inv_pi * dr.maximum(mi.Frame3f.cos_theta(wo), 0.0)
+
+    def pdf(self, ctx, si, wo, active=True):
+        """Cosine-hemisphere density of ``wo``."""
+        if not ctx.is_enabled(mi.BSDFFlags.DiffuseReflection):
+            return mi.Float(0.0)
+        ok = mi.Bool(active) & (mi.Frame3f.cos_theta(si.wi) > 0.0) \
+            & (mi.Frame3f.cos_theta(wo) > 0.0)
+        return dr.select(ok, mi.warp.square_to_cosine_hemisphere_pdf(wo), 0.0)
+
+    def eval_pdf(self, ctx, si, wo, active=True):
+        """``(eval, pdf)`` sharing one shading evaluation."""
+        if not ctx.is_enabled(mi.BSDFFlags.DiffuseReflection):
+            return mi.Color3f(0.0), mi.Float(0.0)
+        value, valid = self._brdf_cos(si, wo, active)
+        cos_o = dr.maximum(mi.Frame3f.cos_theta(wo), 0.0)
+        return value * dr.inv_pi * cos_o, dr.select(valid, cos_o * dr.inv_pi, 0.0)
+
+    def eval_diffuse_reflectance(self, si, active=True):
+        """Blended albedo (used by Mitsuba's AOV integrator and denoiser guides)."""
+        return self.albedo(si, active)
+
+    def traverse(self, callback):
+        """Expose the opaque parameters: ``sharpness``, ``layer{i}_tint``, ``layer{i}_<rule>``."""
+        callback.put("sharpness", self.sharpness, mi.ParamFlags.NonDifferentiable)
+        differentiable = ("roughness", "coverage")
+        for i in range(self.layer_count):
+            callback.put(f"layer{i}_tint", self.tint[i], 0)
+            for k in _LAYER_FLOATS:
+                flags = 0 if k in differentiable else mi.ParamFlags.NonDifferentiable
+                callback.put(f"layer{i}_{k}", self.params[k][i], flags)
+            if self.masks[i] is not None:
+                callback.put(f"layer{i}_mask_lo", self.masks[i][1], mi.ParamFlags.NonDifferentiable)
+                callback.put(f"layer{i}_mask_hi", self.masks[i][2], mi.ParamFlags.NonDifferentiable)
+
+    def parameters_changed(self, keys=None):
+        """Make edited values opaque again: written literals would otherwise bake into kernels."""
+        dr.make_opaque(self.sharpness, self.tint, self.params,
+                       [m[1:] for m in self.masks if m is not None])
+
+    def to_string(self):
+        return (f"TriplanarBSDF[space={self.space}, layers={self.names}, "
+                f"textured={[t is not None for t in self.textures]}]")
+
+
+_CLASSES: dict = {}
+
+
+def _bsdf_class():
+    """:class:`TriplanarBSDF` bound to the active variant's ``mi.BSDF``."""
+    variant = mi.variant()
+    if variant is None:
+        raise RuntimeError("triplanar: select a Mitsuba variant first "
+                           "(arches_render.backend.set_variant())")
+    if variant not in _CLASSES:
+        # nanobind types take a single base, so the body is copied in, not mixed in.
+        body = {k: v for k, v in vars(_TriplanarImpl).items()
+                if k not in ("__dict__", "__weakref__")}
+        _CLASSES[variant] = type("TriplanarBSDF", (mi.BSDF,), body)
+    return _CLASSES[variant]
+
+
+def __getattr__(name):
+    # ``TriplanarBSDF`` depends on the variant chosen at run time, hence lazy.
+    if name == "TriplanarBSDF":
+        return _bsdf_class()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def register() -> None:
+    """Register the ``triplanar`` BSDF plugin for the active variant (idempotent).
+
+    Raises
+    ------
+    RuntimeError
+        When no Mitsuba variant is selected.
+    """
+    cls = _bsdf_class()
+    mi.register_bsdf("triplanar", lambda props: cls(props))
