@@ -83,9 +83,8 @@ def check_llvm(loaded: list[str]) -> None:
     bad = [(p, m) for p, m in zip(loaded, majors) if m is not None and m < MIN_LLVM_MAJOR]
     if bad:
         path, major = bad[0]
-        raise BackendError(
-            f"Dr.Jit loaded LLVM {major} ({path}), which crashes with 'Cannot select fminimum': "
-            f"{INSTALL_HINT}.")
+        why = "crashes with 'Cannot select fminimum'" if major == 15 else "is too old for Dr.Jit"
+        raise BackendError(f"Dr.Jit loaded LLVM {major} ({path}), which {why}: {INSTALL_HINT}.")
 
 
 def set_variant(name: str | None = None) -> str:

@@ -45,6 +45,7 @@ from ..backend import variant
 
 def opaque_float(value) -> "mi.Float":
     """A scalar parameter as an opaque ``mi.Float`` (edited without recompiling)."""
+    variant()
     import drjit as dr
     import mitsuba as mi
     return dr.opaque(mi.Float, float(value))
@@ -52,6 +53,7 @@ def opaque_float(value) -> "mi.Float":
 
 def opaque_point(value) -> "mi.Point3f":
     """A 3-vector parameter as an opaque ``mi.Point3f``."""
+    variant()
     import drjit as dr
     import mitsuba as mi
     v = [float(x) for x in np.asarray(value, dtype=np.float64).reshape(3)]

@@ -87,6 +87,9 @@ class Intersection(_NAry):
     """``min`` of the operands."""
 
     kind = "intersection"
+    # Outside the intersected box the field falls only as fast as the nearest
+    # operand's own box: no unit falloff from this (smaller) box.
+    unit_falloff = False
 
     def eval(self, p):
         import drjit as dr
@@ -185,6 +188,7 @@ class SmoothIntersection(_NAry):
     """Smooth intersection ``-smax_k(-a, -b)`` with radius ``radius`` (metres)."""
 
     kind = "smooth_intersection"
+    unit_falloff = False
 
     def __init__(self, *children, radius=1.0):
         super().__init__(*children)

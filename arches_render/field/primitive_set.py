@@ -16,6 +16,12 @@ farther than ``m`` from ``p``, so its exact distance field is ``<= -m`` there. H
 box (which contains every primitive grown by ``m``) ``f = -m - dist(p, box)``, which
 is below the true union field and joins it continuously at the box.
 
+Empty space: a distance transform of the occupied cells gives, for each cell, the
+distance ``k`` (in cells, centre to centre) to the nearest cell holding a primitive
+of its own; every primitive point lies in such a cell, so from any ``p`` in the
+cell the set is at least ``(k - sqrt(3)) * cell`` away. ``eval_bounds`` returns the
+larger of that and ``-f``, so rays cross sparse sets in strides longer than ``m``.
+
 Spheres are capsules with ``a = b``.
 
 References
@@ -54,6 +60,18 @@ def _grid_lists(lo_boxes, hi_boxes, grid_lo, cell, res):
     return cell_start.astype(np.uint32), cell_count.astype(np.uint32), prim[order].astype(np.uint32)
 
 
+def _empty_distance(lo_boxes, hi_boxes, grid_lo, cell, res):
+    """Per cell, a lower bound of the distance from any of its points to the set."""
+    from scipy.ndimage import distance_transform_edt
+    i0 = np.clip(np.floor((lo_boxes - grid_lo) / cell).astype(np.int64), 0, res - 1)
+    i1 = np.clip(np.floor((hi_boxes - grid_lo) / cell).astype(np.int64), 0, res - 1)
+    occupied = np.zeros(tuple(res[::-1]), dtype=bool)  # (z, y, x) to match the cell index
+    for (x0, y0, z0), (x1, y1, z1) in zip(i0, i1):
+        occupied[z0:z1 + 1, y0:y1 + 1, x0:x1 + 1] = True
+    k = distance_transform_edt(~occupied)
+    return np.maximum((k - np.sqrt(3.0)) * cell, 0.0).ravel()
+
+
 class CapsuleSet(Node):
     """Union of capsules ``(a_i, b_i, r_i)`` evaluated through a grid.
 
@@ -87,18 +105,19 @@ class CapsuleSet(Node):
         hi_p = np.maximum(a, b) + r[:, None]
         self.prim_lo, self.prim_hi = lo_p.min(axis=0), hi_p.max(axis=0)
         size = float(np.median((hi_p - lo_p).max(axis=1)))
-        cell = float(cell_size) if cell_size else 2.0 * size
+        cell = float(cell_size) if cell_size else size
         extent = self.prim_hi - self.prim_lo
         # Keep the cell count bounded for sparse, large sets.
         while np.prod(np.ceil((extent + 2 * cell) / cell) + 1) > max_cells:
             cell *= 1.25
-        m = float(margin) if margin else cell
+        m = float(margin) if margin else 0.5 * cell
         self.margin_np = m
         grid_lo = self.prim_lo - m
         res = np.maximum(np.ceil((self.prim_hi + m - grid_lo) / cell).astype(np.int64), 1)
         self.grid_lo, self.cell, self.res = grid_lo, cell, res
         self.grid_hi = grid_lo + res * cell
         start, count, index = _grid_lists(lo_p - m, hi_p + m, grid_lo, cell, res)
+        self._empty = mi.Float(_empty_distance(lo_p, hi_p, grid_lo, cell, res).astype(np.float32))
         self.max_per_cell = int(count.max())
         self.list_len = len(index)
         self._start, self._count, self._index = mi.UInt32(start), mi.UInt32(count), mi.UInt32(index)
@@ -111,6 +130,22 @@ class CapsuleSet(Node):
         self._ghi = [opaque_float(v) for v in self.grid_hi]
         self._inv_cell = opaque_float(1.0 / cell)
         self.a_np, self.b_np, self.r_np = a, b, r
+
+    def _cell(self, p):
+        import drjit as dr
+        import mitsuba as mi
+        rx, ry, rz = (int(v) for v in self.res)
+        ix = mi.UInt32(dr.clip((p.x - self._glo[0]) * self._inv_cell, 0.0, rx - 1.0))
+        iy = mi.UInt32(dr.clip((p.y - self._glo[1]) * self._inv_cell, 0.0, ry - 1.0))
+        iz = mi.UInt32(dr.clip((p.z - self._glo[2]) * self._inv_cell, 0.0, rz - 1.0))
+        return (iz * ry + iy) * rx + ix
+
+    def eval_bounds(self, p, levels, direction=None):
+        import drjit as dr
+        import mitsuba as mi
+        f = self.eval(p)
+        empty = dr.gather(mi.Float, self._empty, self._cell(p))
+        return f, tuple(dr.maximum(dr.maximum(-f - c, 0.0), empty - c) for c in levels)
 
     def eval(self, p):
         import drjit as dr

@@ -74,7 +74,7 @@ class _FbmParams:
                                                       self.gain_np) / self.wavelength_np
 
 
-class Noise(Node, _FbmParams):
+class Noise(_FbmParams, Node):
     """fBm field ``a fbm(p / lambda)`` (unbounded; a mask or an operand)."""
 
     kind = "noise"
@@ -93,7 +93,7 @@ class Noise(Node, _FbmParams):
         return self.fbm_slope
 
 
-class Displace(Node, _FbmParams):
+class Displace(_FbmParams, Node):
     """Child surface displaced along its field by fBm (see module docstring)."""
 
     kind = "displace"
@@ -122,7 +122,7 @@ class Displace(Node, _FbmParams):
         return self.children[0].lipschitz + self.fbm_slope
 
 
-class DomainWarp(Node, _FbmParams):
+class DomainWarp(_FbmParams, Node):
     """Child evaluated at ``p + a W(p / lambda)`` (see module docstring)."""
 
     kind = "warp"

@@ -69,6 +69,7 @@ def _heightfield(t: Table, ctx):
         H = fbm_heightmap((x0, y0, x1, y1), res, ridged=t.boolean("ridged", False),
                           power=t.number("power", 1.0, lo=0.1, hi=8.0),
                           offset=t.number("offset", 0.0),
+                          edge_falloff=t.number("edge_falloff", 0.0, lo=0.0),
                           **_fbm_args(t, amplitude=30.0, wavelength=80.0, octaves=6))
     return F.Heightfield(H, (x0, y0, x1, y1), base=base)
 

@@ -7,7 +7,9 @@ use elsewhere (one construction tree, one noise), on the plane ``z = 0``:
 
 where ``n`` is fBm normalized to about ``[0, 1]``, ``shape`` optionally folds it into
 ridges (``1 - |2n - 1|``, Musgrave's ridged multifractal idea) and raises it to
-``power`` (values > 1 widen valleys and sharpen peaks).
+``power`` (values > 1 widen valleys and sharpen peaks). With ``edge_falloff`` the
+relief fades to ``offset`` over that many metres at the border of the tile, so the
+tile meets a plain without a cliff.
 
 References
 ----------
@@ -21,7 +23,7 @@ import numpy as np
 
 
 def fbm_heightmap(extent, resolution, amplitude=30.0, wavelength=80.0, octaves=6, lacunarity=2.0,
-                  gain=0.5, seed=0, ridged=False, power=1.0, offset=0.0):
+                  gain=0.5, seed=0, ridged=False, power=1.0, offset=0.0, edge_falloff=0.0):
     """Sample an fBm heightmap.
 
     Parameters
@@ -44,6 +46,8 @@ def fbm_heightmap(extent, resolution, amplitude=30.0, wavelength=80.0, octaves=6
         Fold the noise into ridges.
     power : float
         Exponent applied to the normalized noise.
+    edge_falloff : float
+        Width in metres of the border over which the relief fades out (0: none).
 
     Returns
     -------
@@ -66,4 +70,8 @@ def fbm_heightmap(extent, resolution, amplitude=30.0, wavelength=80.0, octaves=6
     if ridged:
         u = 1.0 - np.abs(2.0 * u - 1.0)
     u = u ** float(power)
+    if edge_falloff > 0:
+        border = np.minimum(np.minimum(X - x0, x1 - X), np.minimum(Y - y0, y1 - Y))
+        t = np.clip(border / edge_falloff, 0.0, 1.0)
+        u = u * t * t * (3.0 - 2.0 * t)
     return offset + amplitude * u

@@ -1,0 +1,187 @@
+"""arches-render benchmarks: one figure a line, each beside a baseline from the same run.
+
+    python benchmarks/run.py [--json] [--repeat N] [NAME ...]
+
+Figures (medians over ``--repeat`` runs, warm kernels unless stated):
+
+``field_evals_tree20``   M evals/s of a ~20-node tree (heightfield, blends, capsules,
+                         displacement, transforms); baseline: the issue's goal, 80.
+``field_evals_set10k``   M evals/s of a 10,000-capsule ``capsule_set`` through its
+                         grid; baseline: the same capsules as a brute-force loop.
+``render_field_vs_mesh`` sphere-traced time / marching-cubes mesh time (stock
+                         ``path``), default scene, same camera, spp and resolution;
+                         baseline: the goal, 2.
+``render_default_s``     ``arches-render render scenes/default.toml`` (640x360, 64 spp)
+                         in a fresh process with an empty kernel cache, JIT included;
+                         baseline: the goal, 30 s.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+
+def _timed_eval(fn, points, repeat):
+    """Median seconds of ``fn(points)`` with kernels compiled (one warm-up)."""
+    import drjit as dr
+    import mitsuba as mi
+    times = []
+    for i in range(repeat + 1):
+        # An opaque offset makes each run a new computation of the same kernel.
+        p = points + dr.opaque(mi.Float, 1e-6 * i)
+        t = time.perf_counter()
+        v = fn(p)
+        dr.eval(v)
+        dr.sync_thread()
+        if i:
+            times.append(time.perf_counter() - t)
+    return statistics.median(times)
+
+
+def _points(n, lo, hi, seed=0):
+    import mitsuba as mi
+    pts = np.random.default_rng(seed).uniform(lo, hi, (n, 3)).astype(np.float32)
+    return mi.Point3f(*(mi.Float(pts[:, i]) for i in range(3)))
+
+
+def tree20():
+    """A ~20-node tree typical of a hand-written scene."""
+    from arches_render import field as F
+    x = np.linspace(0, 1, 129)
+    X, Y = np.meshgrid(x, x)
+    ground = F.Heightfield(8 * np.sin(5 * X) * np.cos(3 * Y) + 4 * X, (-50, -50, 50, 50))
+    arch = F.Blend(*[F.Capsule([20 * np.cos(a), 0, 20 * np.sin(a)], [20 * np.cos(a + 0.4), 0, 20 * np.sin(a + 0.4)], 4)
+                     for a in np.linspace(0, np.pi - 0.4, 6)], radius=2.0)
+    rocks = F.Union(F.Sphere([10, 10, 3], 4), F.Box([-15, 5, 2], [3, 4, 5], rounding=0.5),
+                    F.Transform.rotate(F.Capsule([0, 0, 0], [5, 0, 0], 1.5), [0, 0, 1], 30, [0, 0, 0]))
+    cave = F.Transform.translate(F.Sphere([0, 0, 0], 5), [-20, -20, 2])
+    return F.Difference(F.Blend(ground, F.Displace(arch, 0.5, 5.0, 2, seed=3), rocks, radius=3.0), cave)
+
+
+def bench_field_evals_tree20(repeat):
+    node = tree20()
+    n = 1 << 21
+    t = _timed_eval(node.eval, _points(n, [-50, -50, -5], [50, 50, 30]), repeat)
+    return dict(value=n / t / 1e6, unit="M evals/s", baseline=80.0, baseline_is="goal",
+                nodes=node.count())
+
+
+def bench_field_evals_set10k(repeat):
+    import drjit as dr
+    import mitsuba as mi
+
+    from arches_render import field as F
+    rng = np.random.default_rng(1)
+    a = rng.uniform(-100, 100, (10_000, 3)) * [1, 1, 0.1]
+    b = a + rng.normal(0, 1.0, a.shape)
+    r = rng.uniform(0.3, 1.2, 10_000)
+    node = F.CapsuleSet(a, b, r)
+    n = 1 << 21
+    t = _timed_eval(node.eval, _points(n, [-100, -100, -10], [100, 100, 10]), repeat)
+    # Baseline: the same capsules looped over without the grid (fewer points).
+    A = [mi.Float(a[:, i].astype(np.float32)) for i in range(3)]
+    B = [mi.Float(b[:, i].astype(np.float32)) for i in range(3)]
+    R = mi.Float(r.astype(np.float32))
+
+    def brute(p):
+        def body(i, f):
+            pa = p - mi.Point3f(*(dr.gather(mi.Float, c, i) for c in A))
+            ba = mi.Vector3f(*(dr.gather(mi.Float, c, i) for c in B)) - mi.Vector3f(
+                *(dr.gather(mi.Float, c, i) for c in A))
+            t_ = dr.clip(dr.dot(pa, ba) / dr.maximum(dr.squared_norm(ba), 1e-20), 0.0, 1.0)
+            return i + 1, dr.maximum(f, dr.gather(mi.Float, R, i) - dr.norm(pa - ba * t_))
+        return dr.while_loop((mi.UInt32(0), mi.Float(-1e30) + 0 * p.x), lambda i, f: i < len(r), body)[1]
+
+    m = 1 << 13
+    tb = _timed_eval(brute, _points(m, [-100, -100, -10], [100, 100, 10]), max(1, repeat // 2))
+    return dict(value=n / t / 1e6, unit="M evals/s", baseline=m / tb / 1e6, baseline_is="brute-force loop",
+                goal=20.0, cells=int(np.prod(node.res)), max_per_cell=node.max_per_cell)
+
+
+def bench_render_field_vs_mesh(repeat):
+    from arches_render.render.renderer import build_scene, render_image
+    from arches_render.scene import load_scene
+    desc = load_scene(REPO / "scenes" / "default.toml")
+    w, h, spp = 320, 180, 16
+    out = {}
+    for geometry in ("field", "mesh"):
+        t0 = time.perf_counter()
+        scene = build_scene(desc, geometry, w, h)
+        setup = time.perf_counter() - t0
+        render_image(scene, 4, seed=99)  # compile
+        times = []
+        for i in range(repeat):
+            t = time.perf_counter()
+            render_image(scene, spp, seed=i)
+            times.append(time.perf_counter() - t)
+        out[geometry] = statistics.median(times)
+        out[geometry + "_setup"] = setup
+    return dict(value=out["field"] / out["mesh"], unit="x", baseline=2.0, baseline_is="goal",
+                field_s=out["field"], mesh_s=out["mesh"], mesh_setup_s=out["mesh_setup"],
+                resolution=f"{w}x{h}", spp=spp)
+
+
+def bench_render_default_s(repeat):
+    times = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for i in range(repeat):
+            home = Path(tmp) / f"home{i}"  # Dr.Jit caches kernels under $HOME/.drjit
+            home.mkdir()
+            env = dict(os.environ, HOME=str(home))
+            t = time.perf_counter()
+            subprocess.run([sys.executable, "-m", "arches_render.cli", "render", "scenes/default.toml",
+                            "-o", str(Path(tmp) / "default.exr"), "-q"], cwd=REPO, env=env, check=True)
+            times.append(time.perf_counter() - t)
+    return dict(value=statistics.median(times), unit="s", baseline=30.0, baseline_is="goal",
+                resolution="640x360", spp=64, cold_kernel_cache=True)
+
+
+BENCHMARKS = {
+    "field_evals_tree20": (bench_field_evals_tree20, 5),
+    "field_evals_set10k": (bench_field_evals_set10k, 5),
+    "render_field_vs_mesh": (bench_render_field_vs_mesh, 3),
+    "render_default_s": (bench_render_default_s, 1),
+}
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("names", nargs="*", metavar="NAME", help=f"benchmarks to run (default: all): {', '.join(BENCHMARKS)}")
+    p.add_argument("--json", action="store_true", help="one JSON object a line")
+    p.add_argument("--repeat", type=int, default=0, help="repetitions (default: per benchmark)")
+    args = p.parse_args(argv)
+    unknown = [n for n in args.names if n not in BENCHMARKS]
+    if unknown:
+        p.error(f"unknown benchmark {unknown[0]!r} (choose from {', '.join(BENCHMARKS)})")
+    from arches_render import backend
+    backend.set_variant()
+    for name in args.names or BENCHMARKS:
+        fn, default_repeat = BENCHMARKS[name]
+        res = fn(args.repeat or default_repeat)
+        res["ratio"] = res["value"] / res["baseline"]
+        if args.json:
+            print(json.dumps({"name": name, **{k: (round(v, 4) if isinstance(v, float) else v)
+                                                for k, v in res.items()}}), flush=True)
+        else:
+            extra = ", ".join(f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}"
+                              for k, v in res.items() if k not in ("value", "unit", "baseline", "ratio"))
+            print(f"{name}: {res['value']:.3g} {res['unit']} (baseline {res['baseline']:.3g}, "
+                  f"ratio {res['ratio']:.3g}; {extra})", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,142 @@
+"""Every node's guarantees, checked numerically on random points.
+
+* Lipschitz: ``|f(a) - f(b)| <= L |a - b|`` on random pairs, near and far.
+* Local distance bounds: no point of the ball (or ray segment) that
+  ``eval_bounds`` declares free is inside the set ``{f >= -c}``.
+* Boxes: ``f <= 0`` outside ``bounds()``, and ``f <= -dist(p, box)`` where the
+  node claims unit falloff (what bounding-box culling relies on).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from helpers import random_points, variant
+
+variant()
+
+import drjit as dr  # noqa: E402
+import mitsuba as mi  # noqa: E402
+
+from arches_render import field as F  # noqa: E402
+from arches_render.field.culling import with_culling  # noqa: E402
+
+
+def _heights():
+    x = np.linspace(0, 1, 33)
+    X, Y = np.meshgrid(x, x)
+    return 3.0 * np.sin(6 * X) * np.cos(4 * Y) + 2.0 * X
+
+
+def make_nodes():
+    sphere = F.Sphere([0.3, -0.2, 0.5], 1.2)
+    box = F.Box([0, 0, 0], [1.0, 0.5, 0.8], rounding=0.2)
+    cap = F.Capsule([-1, 0, 0], [1, 0.5, 0.3], 0.4)
+    hf = F.Heightfield(_heights(), (-4, -4, 4, 4))
+    rng = np.random.default_rng(3)
+    a = rng.uniform(-3, 3, (300, 3))
+    cset = F.CapsuleSet(a, a + rng.normal(0, 0.4, (300, 3)), rng.uniform(0.1, 0.4, 300))
+    disp = F.Displace(cap, amplitude=0.3, wavelength=0.7, octaves=3, seed=5)
+    return {
+        "sphere": sphere,
+        "box": box,
+        "capsule": cap,
+        "plane": F.Intersection(F.Plane([0.3, 0.2, 1.0], [0, 0, 0.2]), F.Box([0, 0, 0], [2, 2, 2])),
+        "heightfield": hf,
+        "union": F.Union(sphere, cap, box),
+        "intersection": F.Intersection(sphere, box),
+        "difference": F.Difference(box, sphere),
+        "blend": F.Blend(hf, cap, sphere, radius=0.8),
+        "smooth_intersection": F.SmoothIntersection(sphere, box, radius=0.5),
+        "translate": F.Transform.translate(cap, [1, 2, 3]),
+        "rotate": F.Transform.rotate(box, [1, 1, 0], 37.0, pivot=[0.2, 0, 0]),
+        "scale": F.Transform.scale(box, [2.0, 0.5, 1.0]),
+        "noise": F.Noise(0.5, 0.8, octaves=4, seed=9),
+        "displace": disp,
+        "warp": F.DomainWarp(box, amplitude=0.2, wavelength=1.0, octaves=2, seed=2),
+        "capsule_set": cset,
+        "culled_blend": with_culling(F.Blend(hf, disp, radius=0.5), 1e-3),
+    }
+
+
+NODES = make_nodes()
+
+
+def _points(arr):
+    arr = np.asarray(arr, dtype=np.float32)
+    return mi.Point3f(mi.Float(arr[:, 0]), mi.Float(arr[:, 1]), mi.Float(arr[:, 2]))
+
+
+@pytest.mark.parametrize("name", sorted(NODES))
+def test_lipschitz_bound_holds(name):
+    node = NODES[name]
+    a = random_points(40_000, -5, 5, seed=1)
+    for scale in (1e-2, 1e-1, 1.0, 4.0):
+        rng = np.random.default_rng(int(scale * 1000))
+        b = a + rng.normal(0, scale, a.shape)
+        fa, fb = F.evaluate(node, a), F.evaluate(node, b)
+        dist = np.linalg.norm(a - b, axis=1)
+        ratio = np.abs(fa.astype(np.float64) - fb) / np.maximum(dist, 1e-9)
+        # float32 evaluation: allow rounding of the values themselves.
+        slack = 1e-5 * (1 + np.abs(fa)) / np.maximum(dist, 1e-9)
+        assert np.all(ratio <= node.lipschitz * (1 + 1e-4) + slack), \
+            f"{name}: max slope {ratio.max():.4f} > L = {node.lipschitz:.4f}"
+
+
+def _free_ball_violations(node, level, direction):
+    pts = random_points(4_000, -5, 5, seed=7)
+    f, (d,) = node.eval_bounds(_points(pts), (level,), direction)
+    dr.eval(f, d)
+    d = d.numpy().astype(np.float64)
+    rng = np.random.default_rng(11)
+    worst = -np.inf
+    for _ in range(24):
+        if direction is None:
+            v = rng.normal(size=pts.shape)
+            v /= np.linalg.norm(v, axis=1, keepdims=True)
+            q = pts + v * (d * rng.uniform(0, 1, len(d)) ** (1 / 3))[:, None]
+        else:
+            dd = np.array([direction.x[0], direction.y[0], direction.z[0]], dtype=np.float64)
+            q = pts + dd * (d * rng.uniform(0, 1, len(d)))[:, None]
+        inside = F.evaluate(node, q) + level
+        worst = max(worst, float(np.max(np.where(d > 1e-6, inside, -np.inf))))
+    return worst
+
+
+@pytest.mark.parametrize("name", sorted(n for n in NODES if n != "noise"))
+@pytest.mark.parametrize("level", [0.0, 0.3])
+def test_local_distance_bound_is_free(name, level):
+    node = NODES[name]
+    assert _free_ball_violations(node, level, None) <= 1e-4
+
+
+@pytest.mark.parametrize("name", ["heightfield", "blend", "culled_blend", "rotate", "union"])
+def test_ray_distance_bound_is_free(name):
+    for d in ([1, 0.3, -0.2], [0, 0, -1], [0.6, -0.8, 0.05]):
+        v = np.asarray(d, float) / np.linalg.norm(d)
+        assert _free_ball_violations(NODES[name], 0.0, mi.Vector3f(*(float(x) for x in v))) <= 1e-4
+
+
+@pytest.mark.parametrize("name", sorted(n for n in NODES if n != "noise"))
+def test_no_matter_outside_bounds(name):
+    node = NODES[name]
+    lo, hi = node.bounds()
+    pts = random_points(50_000, -8, 8, seed=5)
+    outside = np.any((pts < lo) | (pts > hi), axis=1)
+    f = F.evaluate(node, pts)
+    assert np.all(f[outside] <= 1e-5)
+    if node.unit_falloff:
+        dist = np.linalg.norm(np.maximum(np.maximum(lo - pts, pts - hi), 0), axis=1)
+        assert np.all(f[outside] <= -dist[outside] + 1e-4)
+
+
+def test_culling_keeps_values_near_surfaces():
+    node = F.Blend(NODES["heightfield"], NODES["displace"], radius=0.5)
+    culled = with_culling(node, 1e-3)
+    assert any(n.kind == "culled" for n in culled.walk())
+    pts = random_points(100_000, -5, 5, seed=2)
+    f = F.evaluate(node, pts)
+    near = np.abs(f) < 0.5
+    fc, _ = culled.eval_bounds(_points(pts[near]), ())
+    np.testing.assert_allclose(fc.numpy(), f[near], atol=1e-5)

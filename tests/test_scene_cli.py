@@ -1,0 +1,132 @@
+"""Scene validation and the CLI as a user meets them: exit codes, one-line errors,
+no traceback, no half-written output."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+from helpers import REPO, SCENES
+
+MINIMAL = textwrap.dedent("""
+    [scene]
+    name = "mini"
+    [render]
+    resolution = [24, 16]
+    spp = 2
+    [camera]
+    origin = [0.0, -6.0, 2.0]
+    target = [0.0, 0.0, 0.5]
+    [[lights]]
+    type = "constant"
+    radiance = 1.0
+    [field]
+    root = "ball"
+    [nodes.ball]
+    type = "sphere"
+    center = [0.0, 0.0, 0.5]
+    radius = 1.0
+""")
+
+
+def run_cli(*args, cwd=None):
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    return subprocess.run([sys.executable, "-m", "arches_render.cli", *map(str, args)],
+                          capture_output=True, text=True, cwd=cwd or REPO, env=env, timeout=300)
+
+
+def write_scene(tmp_path, text, name="scene.toml"):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+BAD = [
+    ("radius = 1.0", "radius = -1.0", "nodes.ball.radius", "> 0"),
+    ("spp = 2", "spp = 0", "render.spp", "in [1, "),
+    ("resolution = [24, 16]", "resolution = [24]", "render.resolution", "[width, height]"),
+    ('type = "constant"', 'type = "sun"', "lights[0].type", "one of"),
+    ('type = "sphere"', 'type = "blob"', "nodes.ball.type", "one of"),
+    ("radius = 1.0", "radius = 1.0\nradiuss = 2.0", "nodes.ball.radiuss", "unknown key"),
+    ('root = "ball"', 'root = "rock"', "field.root", "unknown node 'rock'"),
+    ("[camera]", "[camera]\nfov = 190.0", "camera.fov", "(0, 180)"),
+    ("spp = 2", 'spp = 2\ngeometry = "voxels"', "render.geometry", "field, mesh"),
+]
+
+
+@pytest.mark.parametrize("old,new,key,allowed", BAD)
+def test_bad_scene_exits_2_with_one_line(tmp_path, old, new, key, allowed):
+    path = write_scene(tmp_path, MINIMAL.replace(old, new, 1))
+    out = tmp_path / "out.exr"
+    res = run_cli("render", path, "-o", out, "-q")
+    assert res.returncode == 2, res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in res.stderr, res.stderr
+    assert str(path) in lines[0] and key in lines[0] and allowed in lines[0], lines[0]
+    assert not out.exists() and list(tmp_path.glob("*.exr")) == []
+
+
+def test_cycle_and_syntax_errors(tmp_path):
+    cyc = MINIMAL.replace('root = "ball"', 'root = "a"') + textwrap.dedent("""
+        [nodes.a]
+        type = "union"
+        children = ["b"]
+        [nodes.b]
+        type = "translate"
+        child = "a"
+        offset = [0.0, 0.0, 1.0]
+    """)
+    res = run_cli("info", write_scene(tmp_path, cyc.replace("[nodes.ball]\ntype = \"sphere\"\ncenter = [0.0, 0.0, 0.5]\nradius = 1.0\n", "")))
+    assert res.returncode == 2 and "cycle" in res.stderr and "Traceback" not in res.stderr
+    res = run_cli("info", write_scene(tmp_path, "[scene\nname=", "broken.toml"))
+    assert res.returncode == 2 and "broken.toml" in res.stderr and "not valid TOML" in res.stderr
+    res = run_cli("info", tmp_path / "missing.toml")
+    assert res.returncode == 2 and "no such scene file" in res.stderr
+
+
+def test_bad_arguments_exit_2(tmp_path):
+    path = write_scene(tmp_path, MINIMAL)
+    for args in (["--spp", "0"], ["--resolution", "12"], ["--geometry", "voxel"], ["-o", tmp_path / "x.png"]):
+        res = run_cli("render", path, "-q", *args)
+        assert res.returncode == 2, (args, res.stderr)
+        assert "Traceback" not in res.stderr
+
+
+def test_render_writes_exr_and_png_with_header(tmp_path):
+    from arches_render.imaging.exr import read_exr
+    path = write_scene(tmp_path, MINIMAL)
+    out = tmp_path / "renders" / "mini.exr"
+    res = run_cli("render", path, "-o", out, "--spp", "3", "--seed", "5", "--resolution", "20x12")
+    assert res.returncode == 0, res.stderr
+    assert "render mini" in res.stderr  # progress over sample passes
+    img = read_exr(out)
+    assert img.rgb.shape == (12, 20, 3) and img.rgb.mean() > 0
+    for key, value in (("scene_name", "mini"), ("seed", "5"), ("spp", "3"), ("geometry", "field")):
+        assert img.header[key] == value
+    assert "arches_render_version" in img.header
+    assert out.with_suffix(".png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert [p.name for p in out.parent.iterdir() if p.name.startswith(".")] == []
+
+
+def test_info_reports_tree(tmp_path):
+    res = run_cli("info", SCENES / "default.toml")
+    assert res.returncode == 0, res.stderr
+    assert "nodes" in res.stdout and "bounds" in res.stdout and "KiB" in res.stdout
+
+
+def test_mesh_export(tmp_path):
+    import trimesh
+    path = write_scene(tmp_path, MINIMAL)
+    out = tmp_path / "ball.ply"
+    res = run_cli("mesh", path, "-o", out, "--voxel", "0.1", "-q")
+    assert res.returncode == 0, res.stderr
+    mesh = trimesh.load(out, process=False)
+    assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0
+    # Volume of the unit ball within marching-cubes error.
+    assert abs(mesh.volume - 4 / 3 * 3.14159265) < 0.05
+    res = run_cli("mesh", path, "-o", tmp_path / "ball.stl")
+    assert res.returncode == 2 and "ply, .obj or .glb" in res.stderr
