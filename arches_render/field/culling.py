@@ -23,7 +23,7 @@ import copy
 
 import numpy as np
 
-from .node import Node, opaque_float
+from .node import Node, box_distance, opaque_float
 from .operators import Blend, SmoothIntersection
 
 #: Relative cost (one exact primitive = 1) above which a bounded subtree is culled.
@@ -47,17 +47,9 @@ class Culled(Node):
     def eval(self, p):
         return self.children[0].eval(p)
 
-    def _distance(self, p):
-        import drjit as dr
-        import mitsuba as mi
-        q = mi.Vector3f(dr.maximum(dr.maximum(self._lo[0] - p.x, p.x - self._hi[0]), 0.0),
-                        dr.maximum(dr.maximum(self._lo[1] - p.y, p.y - self._hi[1]), 0.0),
-                        dr.maximum(dr.maximum(self._lo[2] - p.z, p.z - self._hi[2]), 0.0))
-        return dr.norm(q)
-
     def eval_bounds(self, p, levels, direction=None):
         import drjit as dr
-        dist = self._distance(p)
+        dist = box_distance(p, self._lo, self._hi)
 
         def near(p, dist):
             return self.children[0].eval_bounds(p, levels, direction)

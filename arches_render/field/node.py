@@ -131,6 +131,15 @@ def hart_bounds(f, levels, lipschitz):
     return tuple(dr.maximum(-f - c, 0.0) * inv for c in levels)
 
 
+def box_distance(p, lo, hi):
+    """Euclidean distance from ``p`` to the box ``[lo, hi]`` (0 inside); ``lo``, ``hi``
+    are sequences of three ``mi.Float`` (opaque parameters)."""
+    import drjit as dr
+    import mitsuba as mi
+    return dr.norm(mi.Vector3f(*(dr.maximum(dr.maximum(lo[i] - p[i], p[i] - hi[i]), 0.0)
+                                 for i in range(3))))
+
+
 def box_union(boxes):
     """Smallest box containing all ``(lo, hi)`` boxes."""
     los, his = zip(*boxes)

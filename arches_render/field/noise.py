@@ -8,21 +8,24 @@ and the seed: no permutation table to gather); with local coordinates
 
     n(p) = sum_c W_c(u) g_c . (u - c),    W_c = prod_k (c_k ? s(u_k) : 1 - s(u_k)).
 
-Lipschitz bound (derived here, not measured). Differentiating,
-``d_i n = s'(u_i) sum_c' W'_c' [g_c'1 . d_c'1 - g_c'0 . d_c'0] + sum_c W_c g_c,i``.
-The second sum is a convex combination of gradients: norm <= sqrt(2). In the first,
-``|g . d| <= |d_x| + |d_y| + |d_z|``; the pair contributes ``|d_i|`` terms summing
-to 1, and the weighted mean of ``|d_j|`` is ``E(u_j) = u_j + s(u_j)(1 - 2u_j) <= 1/2``
-for the other axes, so ``|first_i| <= 3 s'(u_i) <= 3 * 15/8``. Hence
+Lipschitz bound (proved, not measured). ``grad n = sum_c A_c(u) g_c`` with
+``A_c = grad W_c (u - c)^T + W_c I``; over all choices of the ``g_c`` its largest norm
+is ``max_|e|=1 sum_c M2(A_c^T e)`` (``M2``: sum of the two largest ``|.|``).
+:mod:`~arches_render.field.noise_bound` bounds this by a computer-assisted proof
+(cube net of directions with a proved angle, interval bounds of ``A_c`` on
+adaptive cubes, symmetries of the cell): ``|grad n| <= 3.758``, hence
 
-    |grad n| <= sqrt(3) * 45/8 + sqrt(2) = 11.16   (NOISE_LIPSCHITZ)
+    NOISE_LIPSCHITZ = 3.76.
 
-The gradient bound is 3.6 times the largest slope found by sampling (3.08): the
-price of a guarantee. For the range, ``|g . d| <= M2(d)`` (the sum of the two
-largest ``|d_k|``), so ``|n(u)| <= R(u) = sum_c W_c(u) M2(u - c)``, a function of
-``u`` alone. Its maximum on a 65^3 grid of the cell is 1.036; ``R`` is at most
-12-Lipschitz (the chain above with ``M2`` sqrt(2)-Lipschitz) and every point of the
-cell is within 0.0135 of the grid, so ``|n| <= 1.036 + 12 * 0.0135 < 1.2``
+It is tight: at ``u = (1/2, 1/2, 1/2)`` the gradients ``g_c = -sigma_x (0, sigma_y,
+sigma_z)`` (``sigma = 2c - 1``) give ``|grad n| = 15/4``; random gradients reach
+about 3.08.
+
+For the range, ``|g . d| <= M2(d)`` (the sum of the two largest ``|d_k|``), so
+``|n(u)| <= R(u) = sum_c W_c(u) M2(u - c)``, a function of ``u`` alone. Its maximum
+on a 65^3 grid of the cell is 1.036; ``R`` is at most 12-Lipschitz (a crude
+chain-rule bound, ``M2`` being sqrt(2)-Lipschitz) and every point of the cell is
+within 0.0135 of the grid, so ``|n| <= 1.036 + 12 * 0.0135 < 1.2``
 (NOISE_RANGE; sampling finds 0.92).
 
 fBm sums octaves ``k = 0..K-1`` of ``gain^k n(lacunarity^k p)`` with per-octave
@@ -40,7 +43,10 @@ from __future__ import annotations
 
 import math
 
-NOISE_LIPSCHITZ = math.sqrt(3.0) * 3.0 * 15.0 / 8.0 + math.sqrt(2.0)
+# Certified by arches_render/field/noise_bound.py (python -m arches_render.field.noise_bound):
+# sup |grad n| <= 3.7580 = max over adaptive cubes of [net max of Phi / cos(delta) + V(cube)],
+# e.g. the cube at u = (1/2,1/2,1/2): 3.6927 / 0.98425 + 0.0049 = 3.7567; lower bound 15/4 = 3.75.
+NOISE_LIPSCHITZ = 3.76
 NOISE_RANGE = 1.2
 
 

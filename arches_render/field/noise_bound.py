@@ -35,8 +35,8 @@ gradient of largest norm, ``Phi_u(e) >= k* . e``.
 
 Step 2: directions (adaptive cube net, rigorous angle). Map a unit ``e`` to
 ``p = e / |e|_inf`` on the surface of ``[-1, 1]^3``. A face is cut into square
-cells ``Q`` of half-side ``r``; ``q`` is the centre of the cell holding ``p`` of
-``k* / |k*|``. Then ``|p - q| <= sqrt(2) r``, ``p . q >= 1 > 0``, and the distance
+cells ``Q`` of half-side ``r <= 1/2``; take ``e = k* / |k*|`` and ``q`` the centre of
+the cell holding its ``p``. Then ``|p - q| <= sqrt(2) r``, ``p . q >= 1 > 0``, and the distance
 from ``p`` to the line ``R q`` is ``|p| sin(theta) <= |p - q|`` with ``|p| >= 1``,
 so ``sin(theta) <= sqrt(2) r`` and
 
@@ -294,6 +294,8 @@ def certify(grid: int = 8, net: int = 4, tol: float = 0.008, max_depth: int = 8,
     max_depth, net_levels : int
         Cube splits and direction-cell refinements allowed.
     """
+    if net < 2:
+        raise ValueError("net >= 2 is needed (cos_Q = sqrt(1 - 2 r^2) with r = 1/net)")
     t0 = time.perf_counter()
     half0 = 0.25 / grid
     g = (np.arange(grid) + 0.5) * (2 * half0)

@@ -59,52 +59,52 @@ class _NAry(Node):
         return max(c.lipschitz for c in self.children)
 
 
-class Union(_NAry):
-    """``max`` of the operands."""
-
-    kind = "union"
+class _Lattice(_NAry):
+    """Union or intersection: one combinator for values, its dual for distances."""
 
     def eval(self, p):
-        import drjit as dr
         v = self.children[0].eval(p)
         for c in self.children[1:]:
-            v = dr.maximum(v, c.eval(p))
+            v = self._value(v, c.eval(p))
         return v
 
     def eval_bounds(self, p, levels, direction=None):
-        import drjit as dr
         f, ds = self.children[0].eval_bounds(p, levels, direction)
         for c in self.children[1:]:
             fc, dc = c.eval_bounds(p, levels, direction)
-            f, ds = dr.maximum(f, fc), tuple(dr.minimum(a, b) for a, b in zip(ds, dc))
+            f, ds = self._value(f, fc), tuple(self._distance(a, b) for a, b in zip(ds, dc))
         return f, ds
+
+
+class Union(_Lattice):
+    """``max`` of the operands; as far as the nearest operand."""
+
+    kind = "union"
+
+    @staticmethod
+    def _value(a, b):
+        import drjit as dr
+        return dr.maximum(a, b)
+
+    @staticmethod
+    def _distance(a, b):
+        import drjit as dr
+        return dr.minimum(a, b)
 
     def bounds(self):
         return box_union([c.bounds() for c in self.children])
 
 
-class Intersection(_NAry):
-    """``min`` of the operands."""
+class Intersection(_Lattice):
+    """``min`` of the operands; as far as the farthest operand."""
 
     kind = "intersection"
     # Outside the intersected box the field falls only as fast as the nearest
     # operand's own box: no unit falloff from this (smaller) box.
     unit_falloff = False
 
-    def eval(self, p):
-        import drjit as dr
-        v = self.children[0].eval(p)
-        for c in self.children[1:]:
-            v = dr.minimum(v, c.eval(p))
-        return v
-
-    def eval_bounds(self, p, levels, direction=None):
-        import drjit as dr
-        f, ds = self.children[0].eval_bounds(p, levels, direction)
-        for c in self.children[1:]:
-            fc, dc = c.eval_bounds(p, levels, direction)
-            f, ds = dr.minimum(f, fc), tuple(dr.maximum(a, b) for a, b in zip(ds, dc))
-        return f, ds
+    _value = staticmethod(Union._distance)
+    _distance = staticmethod(Union._value)
 
     def bounds(self):
         return box_intersection([c.bounds() for c in self.children])

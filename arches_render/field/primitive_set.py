@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .node import Node, opaque_float
+from .node import Node, box_distance, opaque_float
 
 
 def _grid_lists(lo_boxes, hi_boxes, grid_lo, cell, res):
@@ -150,11 +150,7 @@ class CapsuleSet(Node):
     def eval(self, p):
         import drjit as dr
         import mitsuba as mi
-        rx, ry, rz = (int(v) for v in self.res)
-        ix = mi.UInt32(dr.clip((p.x - self._glo[0]) * self._inv_cell, 0.0, rx - 1.0))
-        iy = mi.UInt32(dr.clip((p.y - self._glo[1]) * self._inv_cell, 0.0, ry - 1.0))
-        iz = mi.UInt32(dr.clip((p.z - self._glo[2]) * self._inv_cell, 0.0, rz - 1.0))
-        cell = (iz * ry + iy) * rx + ix
+        cell = self._cell(p)
         start = dr.gather(mi.UInt32, self._start, cell)
         count = dr.gather(mi.UInt32, self._count, cell)
 
@@ -171,10 +167,7 @@ class CapsuleSet(Node):
 
         _, inside = dr.while_loop((mi.UInt32(0), -self._m + mi.Float(0.0)),
                                   lambda i, f: i < count, body, label="capsule_set")
-        q = mi.Vector3f(dr.maximum(dr.maximum(self._glo[0] - p.x, p.x - self._ghi[0]), 0.0),
-                        dr.maximum(dr.maximum(self._glo[1] - p.y, p.y - self._ghi[1]), 0.0),
-                        dr.maximum(dr.maximum(self._glo[2] - p.z, p.z - self._ghi[2]), 0.0))
-        outside = dr.norm(q)
+        outside = box_distance(p, self._glo, self._ghi)
         return dr.select(outside > 0.0, -self._m - outside, inside)
 
     def bounds(self):

@@ -73,10 +73,9 @@ class ImplicitPathIntegrator(mi.SamplingIntegrator):
             return si, mi.Bool(False)
         tmax = dr.select(si.is_valid(), si.t, ray.maxt)
         hit, t = self.tracer.trace(ray.o, ray.d, tmax, active)
-        p = ray.o + ray.d * t
-        n = self.tracer.normal(p, t)
+        p, n = self.tracer.surface(ray.o + ray.d * t, t)
         # Lift the point off the surface so that rays spawned here start in air.
-        offset = dr.maximum(1e-5 * self.tracer.scale, 2.0 * self.tracer.eps * t)
+        offset = dr.maximum(1e-5 * self.tracer.scale, 0.1 * self.tracer.eps * t)
         sf = dr.zeros(mi.SurfaceInteraction3f)
         sf.t = t
         sf.p = p + n * offset

@@ -116,9 +116,26 @@ class SphereTracer:
         t, _, _, _, _, hit, _, _, _, _, _ = dr.while_loop(state, cond, body, label="sphere_trace")
         return hit & active, t
 
-    def normal(self, p, t):
-        """Outward unit normal ``-grad f / |grad f|`` at hits ``p`` found at distance ``t``."""
+    def surface(self, p, t):
+        """Surface point and outward normal for hits ``p`` found at distance ``t``.
+
+        A hit stops up to ``eps t`` in front of the surface; one Newton step along
+        the gradient, ``p - f grad f / |grad f|^2``, puts it on the surface up to
+        second order, so that rays spawned from it need only a tiny offset (an
+        offset of the size of the tolerance lets light leak past contact shadows).
+
+        Returns
+        -------
+        (mi.Point3f, mi.Vector3f)
+            Projected point and unit normal ``-grad f / |grad f|``.
+        """
         import drjit as dr
         from ..field import gradient
         h = dr.maximum(1e-5 * self.scale, 0.5 * self.eps * t)
-        return -dr.normalize(gradient(self.field, p, h, culled=True))
+        g = gradient(self.field, p, h, culled=True)
+        f = self.field.eval_bounds(p, ())[0]
+        g2 = dr.squared_norm(g)
+        step = dr.select(g2 > 0.0, f / g2, 0.0)
+        # Never move farther than the tolerance that stopped the ray.
+        step = dr.clip(step * dr.sqrt(g2), -self.eps * t, self.eps * t) * dr.rsqrt(dr.maximum(g2, 1e-30))
+        return p - g * step, -dr.normalize(g)

@@ -5,7 +5,9 @@ A scene file is data, never code. Top-level tables:
 ``[scene]``      ``name``, ``description``
 ``[render]``     ``resolution = [w, h]``, ``spp``, ``passes``, ``seed``, ``max_depth``,
                  ``rr_depth``, ``geometry = "field" | "mesh"``, ``voxel`` (mesh mode,
-                 metres), ``exposure`` (preview stops), ``eps``, ``omega``
+                 metres), ``exposure`` (preview stops), ``eps`` (relative hit
+                 tolerance, default 2e-4: well below a pixel, since a tolerance
+                 near a pixel inflates every silhouette), ``omega``
 ``[camera]``     ``origin``, ``target``, ``up`` (default +Z), ``fov`` (degrees, horizontal)
 ``[[lights]]``   ``type`` = ``sunsky`` | ``directional`` | ``point`` | ``constant`` | ``envmap``
 ``[materials.NAME]`` ``type = "triplanar"`` with ``preset`` and ``overrides``, or
@@ -226,7 +228,7 @@ def parse_scene(data: dict, path) -> SceneDescription:
         geometry=r.string("geometry", "field", choices=set(GEOMETRY_MODES)),
         voxel=r.number("voxel", 0.0, lo=0.0),
         exposure=r.number("exposure", 0.0, lo=-20, hi=20),
-        eps=r.number("eps", 2e-4, lo=1e-7, hi=1e-1),
+        eps=r.number("eps", 2e-4, lo=1e-7, hi=1e-2),
         omega=r.number("omega", 1.6, lo=1.0, hi=1.95))
     if settings.max_depth == 0:
         raise r.error("max_depth", "must be -1 (unbounded) or an integer in [1, 1024] (got 0)")
