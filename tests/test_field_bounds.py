@@ -98,7 +98,7 @@ def _free_ball_violations(node, level, direction):
             q = pts + v * (d * rng.uniform(0, 1, len(d)) ** (1 / 3))[:, None]
         else:
             dd = np.array([direction.x[0], direction.y[0], direction.z[0]], dtype=np.float64)
-            q = pts + dd * (d * rng.uniform(0, 1, len(d)))[:, None]
+            q = pts + dd * (d * rng.uniform(-1, 1, len(d)))[:, None]  # both sides of the line
         inside = F.evaluate(node, q) + level
         worst = max(worst, float(np.max(np.where(d > 1e-6, inside, -np.inf))))
     return worst
@@ -113,7 +113,7 @@ def test_local_distance_bound_is_free(name, level):
 
 @pytest.mark.parametrize("name", ["heightfield", "blend", "culled_blend", "rotate", "union"])
 def test_ray_distance_bound_is_free(name):
-    for d in ([1, 0.3, -0.2], [0, 0, -1], [0.6, -0.8, 0.05]):
+    for d in ([1, 0.3, -0.2], [0, 0, -1], [0.6, -0.8, 0.05], [-0.2, 0.4, 0.7]):
         v = np.asarray(d, float) / np.linalg.norm(d)
         assert _free_ball_violations(NODES[name], 0.0, mi.Vector3f(*(float(x) for x in v))) <= 1e-4
 

@@ -22,10 +22,11 @@ A ball around ``p`` of radius ``min(R_w, z - M_w)`` is therefore free of ground,
     d(p) = max(d_hart, max_w min(R_w, z - M_w(p)))
 
 is a rigorous lower bound of the distance to the solid: a ray skimming high above
-low ground steps far, where the global ``L`` alone would crawl. Along a ray of unit
-direction ``u`` the bound is better still: the ray stays inside the window for
-``R_w / |u_xy|`` and above ``M_w`` for ``(z - M_w) / max(-u_z, 0)``, so it may advance
-by the smaller of the two (the per-level form of maximum-mipmap traversal).
+low ground steps far, where the global ``L`` alone would crawl. Along the line of
+unit direction ``u`` the bound is better still: on both sides of ``p`` the line stays
+inside the window for ``R_w / |u_xy|`` and above ``M_w`` for ``(z - M_w) / |u_z|``,
+so the smaller of the two is free (the per-level form of maximum-mipmap
+traversal, two-sided so that over-relaxed steps can be checked).
 
 References
 ----------
@@ -130,7 +131,7 @@ class Heightfield(Node):
         above = [p.z - dr.gather(mi.Float, maxima, k) for maxima in self._maxima]
         if direction is not None:
             inv_run = dr.rcp(dr.maximum(dr.sqrt(dr.square(direction.x) + dr.square(direction.y)), 1e-7))
-            inv_drop = dr.rcp(dr.maximum(-direction.z, 1e-7))
+            inv_drop = dr.rcp(dr.maximum(dr.abs(direction.z), 1e-7))
         ds = []
         for c in levels:
             d = dr.maximum(dr.maximum(-top - c, 0.0) * self._inv_L, dr.maximum(-box - c, 0.0))

@@ -26,14 +26,10 @@ questions:
     evaluation of the node, so the kernel holds each node's code once.
 
     With ``direction`` (a unit ``mi.Vector3f``), ``d`` may instead bound the
-    distance *along the ray* ``p + s direction`` (``s >= 0``) before it meets the
-    set: a ball free of the set is one such bound, and nodes that know better
-    (heightfields) return more. Such bounds look forward only, so a tracer that
-    over-relaxes its steps must not pass a direction.
-
-Parameters that may change between renders are held in opaque Dr.Jit arrays so
-that a new value does not recompile the kernel (Dr.Jit bakes Python floats into
-kernels as literals).
+    distance *along the line* ``p + s direction`` before it meets the set, on both
+    sides (``|s| < d`` is free): a free ball is one such bound, and nodes that know
+    better (heightfields) return more. Two-sided intervals are what over-relaxed
+    sphere tracing needs to check that consecutive steps overlap.
 """
 
 from __future__ import annotations

@@ -41,7 +41,6 @@ eroded fractal terrains. SIGGRAPH '89, 41-50.
 
 from __future__ import annotations
 
-import math
 
 # Certified by arches_render/field/noise_bound.py (python -m arches_render.field.noise_bound):
 # sup |grad n| <= 3.7580 = max over adaptive cubes of [net max of Phi / cos(delta) + V(cube)],

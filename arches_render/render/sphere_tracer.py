@@ -5,8 +5,9 @@ is at least ``r(p) = -f(p) / L`` away from the surface (Hart 1996), so a ray may
 advance by ``r``. The tracer uses the tighter local bound ``r`` composed through the
 operators by ``Node.eval_bounds`` (same guarantee, see :mod:`arches_render.field.node`).
 Over-relaxation (Keinert et al. 2014) advances by ``omega r``
-instead; the step was safe when the unbounding spheres of the two points overlap,
-``r_prev + r >= step``; otherwise the tracer goes back to the previous point, takes
+instead; the step was safe when the free intervals of the two points on the ray's
+line overlap, ``r_prev + r >= step`` (``eval_bounds`` with the ray direction returns
+two-sided line bounds, which need not be balls); otherwise the tracer goes back to the previous point, takes
 the plain step ``r_prev`` and continues with ``omega = 1``.
 
 A ray stops on the surface when ``-f < eps t`` (a tolerance that grows with distance,
@@ -86,14 +87,12 @@ class SphereTracer:
         t_end = dr.minimum(t_out, tmax)
         active = mi.Bool(active) & (t_start <= t_end)
         omega0 = mi.Float(self.omega)
-        # Ray-directional bounds look forward only: incompatible with relaxation.
-        relax_free = self.omega == 1.0
 
         def cond(t, t_prev, r_prev, step, omega, hit, alive, i, o, d, t_end):
             return alive
 
         def body(t, t_prev, r_prev, step, omega, hit, alive, i, o, d, t_end):
-            f, (r,) = self.field.eval_bounds(o + d * t, (0.0,), d if relax_free else None)
+            f, (r,) = self.field.eval_bounds(o + d * t, (0.0,), d)
             failed = (omega > 1.0) & (r + r_prev < step)
             # Relaxed step overshot: return to the last safe point, stop relaxing.
             t_safe = t_prev + r_prev
