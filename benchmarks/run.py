@@ -143,7 +143,8 @@ def bench_render_default_s(repeat):
             env = dict(os.environ, HOME=str(home))
             t = time.perf_counter()
             subprocess.run([sys.executable, "-m", "arches_render.cli", "render", "scenes/default.toml",
-                            "-o", str(Path(tmp) / "default.exr"), "-q"], cwd=REPO, env=env, check=True)
+                            "-o", str(Path(tmp) / "default.exr"), "-q"], cwd=REPO, env=env, check=True,
+                           stdout=subprocess.DEVNULL)
             times.append(time.perf_counter() - t)
     return dict(value=statistics.median(times), unit="s", baseline=30.0, baseline_is="goal",
                 resolution="640x360", spp=64, cold_kernel_cache=True)

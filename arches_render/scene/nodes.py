@@ -1,8 +1,34 @@
 """Build field nodes from the ``[field]`` and ``[nodes.*]`` tables of a scene file.
 
 A node is a table with a ``type``; operands are given by ``child`` / ``children``,
-each either the name of a table under ``[nodes]`` or an inline table. Every node
-type, its keys and their ranges are listed in :data:`NODE_TYPES`.
+each either the name of a table under ``[nodes]`` or an inline table. Lengths are
+metres, angles degrees; ``[ ]`` marks an optional key and its default.
+
+=====================  ==================================================================
+type                   keys
+=====================  ==================================================================
+sphere                 center, radius > 0
+box                    center, size (3 numbers >= 0), [rounding = 0]
+capsule                a, b, radius > 0
+plane                  normal (non-zero), [point = origin]  (unbounded: intersect it)
+heightfield            extent = [x0, y0, x1, y1], [base], [source = "fbm" | "file"];
+                       fbm: [resolution = [256, 256]], amplitude, wavelength, octaves,
+                       lacunarity, gain, seed, [ridged], [power = 1], [offset = 0],
+                       [edge_falloff = 0]; file: file (.npy, 16-bit .png, .tif),
+                       [height_scale = 1], [height_offset = 0]
+union, intersection    children (>= 1)
+difference             children (>= 2): the first minus the others
+blend                  children, radius > 0 (smooth union)
+smooth_intersection    children, radius > 0
+translate              child, offset
+rotate                 child, axis, angle, [pivot]
+scale                  child, factor (number or 3 numbers > 0), [pivot]
+noise                  [amplitude = 1], [wavelength = 1], [octaves = 4], [lacunarity = 2],
+                       [gain = 0.5], [seed = 0]
+displace               child + the noise keys: child's field plus fBm
+warp                   child + the noise keys (octaves = 3): domain warp
+capsule_set            file (.npz with a, b, radius) or inline a, [b = a], radius
+=====================  ==================================================================
 """
 
 from __future__ import annotations
