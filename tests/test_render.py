@@ -124,3 +124,56 @@ def test_shipped_scene_field_agrees_with_mesh(name):
     field = render_image(build_scene(desc, "field", w, h), spp, seed=1)
     mesh = render_image(build_scene(desc, "mesh", w, h), spp, seed=1)
     _agree(field, mesh)
+
+
+def test_material_mask_and_other_lights(tmp_path):
+    """A noise mask changes a triplanar layer's coverage; point and envmap lights render."""
+    import tomllib
+
+    from arches_render.imaging.exr import write_exr
+    env = np.ones((8, 16, 3), np.float32) * np.array([0.3, 0.4, 0.6], np.float32)
+    write_exr(tmp_path / "sky.exr", env, half=False)
+    text = MINI.replace('[[lights]]\ntype = "sunsky"\nelevation = 40.0', '''[[lights]]
+type = "envmap"
+file = "sky.exr"
+[[lights]]
+type = "point"
+position = [2.0, -3.0, 4.0]
+intensity = 30.0''').replace('preset = "basalt"', 'preset = "terrain"')
+    plain = parse_scene(tomllib.loads(text), tmp_path / "s.toml")
+    masked = parse_scene(tomllib.loads(text.replace('preset = "terrain"', '''preset = "terrain"
+masks = [{ layer = "snow", node = "cover", lo = -1.0, hi = -0.5 }]''') + '''
+[nodes.cover]
+type = "noise"
+'''), tmp_path / "s.toml")
+    # The terrain preset's snow is absent at these heights: masking it changes
+    # nothing. Where snow is forced everywhere, a mask (noise ~0 < lo) removes it.
+    inverted = parse_scene(tomllib.loads(text.replace('preset = "terrain"', '''preset = "terrain"
+overrides = { "snow.height_min" = 0.0, "snow.slope_max" = 90.0 }
+masks = [{ layer = "snow", node = "cover", lo = 0.5, hi = 1.0 }]''') + '''
+[nodes.cover]
+type = "noise"
+'''), tmp_path / "s.toml")
+    snowy = parse_scene(tomllib.loads(text.replace('preset = "terrain"', '''preset = "terrain"
+overrides = { "snow.height_min" = 0.0, "snow.slope_max" = 90.0 }''')), tmp_path / "s.toml")
+    imgs = [render_image(build_scene(d), 16, seed=1) for d in (plain, masked, snowy, inverted)]
+    for img in imgs:
+        assert np.all(np.isfinite(img)) and img.mean() > 0.01
+    assert abs(imgs[1].mean() / imgs[0].mean() - 1) < 1e-3  # masking an absent layer
+    assert imgs[2].mean() > 1.1 * imgs[3].mean()     # snow removed by the inverted mask
+
+
+@pytest.mark.parametrize("omega", [1.0, 1.6, 1.9])
+def test_relaxed_step_cannot_skip_a_surface_before_tmax(omega):
+    """A relaxed step that would jump past ``tmax`` is still checked before the ray
+    leaves (regression: such rays used to miss a surface lying just before a mesh)."""
+    from arches_render.render.sphere_tracer import SphereTracer
+    ball = F.Union(F.Sphere([10.0, 0.0, 0.0], 0.05), F.Sphere([0.0, 30.0, 0.0], 1.0))
+    tracer = SphereTracer(ball, omega=omega)
+    o = mi.Point3f(0.0, 0.0, 0.0)
+    d = mi.Vector3f(1.0, 0.0, 0.0)
+    for tmax in (10.2, 11.0, 16.0):
+        hit, t = tracer.trace(o, d, mi.Float(tmax), True)
+        assert bool(hit[0]) and abs(t[0] - 9.95) < 0.01, (tmax, hit, t)
+    hit, _ = tracer.trace(o, d, mi.Float(9.9), True)
+    assert not bool(hit[0])

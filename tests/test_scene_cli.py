@@ -130,3 +130,20 @@ def test_mesh_export(tmp_path):
     assert abs(mesh.volume - 4 / 3 * 3.14159265) < 0.05
     res = run_cli("mesh", path, "-o", tmp_path / "ball.stl")
     assert res.returncode == 2 and "ply, .obj or .glb" in res.stderr
+
+
+def test_material_mask_errors(tmp_path):
+    scene = MINIMAL.replace('[field]\nroot = "ball"', textwrap.dedent('''
+        [materials.rock]
+        type = "triplanar"
+        preset = "terrain"
+        masks = [{ layer = "moss", node = "patches" }]
+        [nodes.patches]
+        type = "noise"
+        [field]
+        root = "ball"
+        material = "rock"'''))
+    res = run_cli("info", write_scene(tmp_path, scene))
+    assert res.returncode == 2 and "materials.rock.masks[0].layer" in res.stderr and "grass" in res.stderr
+    res = run_cli("info", write_scene(tmp_path, scene.replace('"moss"', '"snow"')))
+    assert res.returncode == 0, res.stderr

@@ -57,6 +57,21 @@ def field_mesh_shape(desc, bsdf, voxel=None, progress=None):
     return mesh, tri
 
 
+def load_materials(desc) -> dict:
+    """Mitsuba BSDF objects of the scene's materials, with their layer masks attached.
+
+    Objects rather than dictionaries: a mask is a field node, which cannot travel
+    through ``mi.load_dict``; meshes and the field then share the same BSDF.
+    """
+    import mitsuba as mi
+    bsdfs = {}
+    for name, mat in desc.materials.items():
+        bsdfs[name] = mi.load_dict(mat)
+        for layer, node, lo, hi in desc.material_masks.get(name, ()):
+            bsdfs[name].set_layer_mask(layer, node, lo, hi)
+    return bsdfs
+
+
 def build_scene(desc, geometry=None, width=None, height=None, voxel=None, progress=None):
     """Assemble the Mitsuba scene of a :class:`SceneDescription`.
 
@@ -82,15 +97,12 @@ def build_scene(desc, geometry=None, width=None, height=None, voxel=None, progre
     geometry = geometry or s.geometry
     d = {"type": "scene",
          "sensor": sensor_dict(desc, width or s.width, height or s.height)}
-    for name, mat in desc.materials.items():
-        d[name] = dict(mat, id=name) if isinstance(mat, dict) else mat
+    bsdfs = load_materials(desc)
     for i, light in enumerate(desc.lights):
         d[f"light{i}"] = light
     for i, mesh in enumerate(desc.meshes):
-        d[f"mesh{i}"] = mesh
-    field_bsdf = None
-    if desc.field is not None:
-        field_bsdf = mi.load_dict(desc.materials[desc.field_material])
+        d[f"mesh{i}"] = dict(mesh, bsdf=bsdfs[mesh["bsdf"]["id"]])
+    field_bsdf = bsdfs[desc.field_material] if desc.field is not None else None
     if geometry == "mesh" or desc.field is None:
         d["integrator"] = {"type": "path", "max_depth": s.max_depth, "rr_depth": s.rr_depth}
         if desc.field is not None:

@@ -98,15 +98,17 @@ class SphereTracer:
             t_safe = t_prev + r_prev
             new_hit = ~failed & (-f < self.eps * t)
             hit = hit | (alive & new_hit)
-            next_step = dr.select(failed, 0.0, omega * r)
-            t_next = dr.select(failed, t_safe, t + next_step)
+            # Steps stop at t_end, so that a relaxed step past the end is still
+            # checked there before the ray may leave (else it could skip a surface).
+            t_next = dr.select(failed, t_safe, dr.minimum(t + omega * r, t_end))
+            step = dr.select(failed, r_prev, t_next - t)
             t_prev = dr.select(failed, t_prev, t)
             r_prev = dr.select(failed, r_prev, r)
             omega = dr.select(failed, 1.0, omega)
-            step = dr.select(failed, r_prev, next_step)
-            # On failure the next evaluation is at t_safe; keep step = r_prev so
-            # the overlap test there is trivially satisfied.
-            alive = alive & ~new_hit & (t_next <= t_end) & (i + 1 < self.max_steps)
+            # On failure the next evaluation is at t_safe; step = r_prev makes the
+            # overlap test there trivially satisfied.
+            done = ~failed & (t >= t_end)  # [t_start, t_end] verified free
+            alive = alive & ~new_hit & ~done & (i + 1 < self.max_steps)
             t = dr.select(new_hit, t, t_next)
             return t, t_prev, r_prev, step, omega, hit, alive, i + 1, o, d, t_end
 

@@ -10,7 +10,9 @@ A scene file is data, never code. Top-level tables:
                  near a pixel inflates every silhouette), ``omega``
 ``[camera]``     ``origin``, ``target``, ``up`` (default +Z), ``fov`` (degrees, horizontal)
 ``[[lights]]``   ``type`` = ``sunsky`` | ``directional`` | ``point`` | ``constant`` | ``envmap``
-``[materials.NAME]`` ``type = "triplanar"`` with ``preset`` and ``overrides``, or
+``[materials.NAME]`` ``type = "triplanar"`` with ``preset``, ``overrides`` and
+                 ``masks = [{layer, node, lo, hi}]`` (a layer's coverage times
+                 ``smoothstep(lo, hi, node(p))`` for a field or noise node), or
                  ``type = "diffuse"`` with ``color``
 ``[[meshes]]``   ``file`` (PLY/OBJ) or ``shape`` (rectangle, disk, sphere, cube), a
                  transform (``translate``, ``rotate = {axis, angle}``, ``scale``), ``material``
@@ -75,6 +77,7 @@ class SceneDescription:
     camera: Camera
     lights: list = dc_field(default_factory=list)       # Mitsuba emitter dicts
     materials: dict = dc_field(default_factory=dict)    # name -> Mitsuba BSDF dict
+    material_masks: dict = dc_field(default_factory=dict)  # name -> [(layer, node, lo, hi)]
     meshes: list = dc_field(default_factory=list)       # Mitsuba shape dicts
     field: object = None                                # root Node or None
     field_material: str | None = None
@@ -124,8 +127,9 @@ def _light(t: Table, base_dir: Path) -> dict:
     return d
 
 
-def _material(t: Table) -> dict:
+def _material(t: Table, builder) -> tuple[dict, list]:
     kind = t.string("type", "triplanar", choices={"triplanar", "diffuse"})
+    masks = []
     if kind == "diffuse":
         d = {"type": "diffuse", "reflectance": _rgb(t, "color", [0.5, 0.5, 0.5])}
     else:
@@ -136,10 +140,20 @@ def _material(t: Table) -> dict:
             raise t.error("overrides", "must be a table")
         try:
             d = presets.preset_dict(name, over)
+            layers, _ = presets.preset_layers(name, over)
         except ValueError as exc:
             raise t.error("overrides" if over else "preset", str(exc)) from None
+        names = [layer.name for layer in layers]
+        for m in t.tables("masks"):
+            layer = m.string("layer", choices=set(names[1:]))
+            node = builder.build(m.raw("node"), m, "node")
+            lo, hi = m.number("lo", 0.0), m.number("hi", 1.0)
+            if lo == hi:
+                raise m.error("hi", f"must differ from lo ({lo})")
+            m.finish()
+            masks.append((names.index(layer), node, lo, hi))
     t.finish()
-    return d
+    return d, masks
 
 
 def _mesh(t: Table, base_dir: Path, materials: dict) -> dict:
@@ -246,21 +260,25 @@ def parse_scene(data: dict, path) -> SceneDescription:
     if not lights:
         raise root.error("lights", "at least one light is required ([[lights]] with type = sunsky, ...)")
 
+    nodes_tbl = root.raw("nodes", {})
+    if not isinstance(nodes_tbl, dict):
+        raise root.error("nodes", "must be a table of named node tables")
+    builder = NodeBuilder(nodes_tbl, path, base_dir)
+
     mats = root.table("materials", {})
     materials = {"default": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.5] * 3}}}
+    material_masks = {}
     for mname in list(mats.data):
-        materials[mname] = _material(mats.table(mname))
+        materials[mname], masks = _material(mats.table(mname), builder)
+        if masks:
+            material_masks[mname] = masks
     mats.finish()
 
     meshes = [_mesh(t, base_dir, materials) for t in root.tables("meshes")]
 
     field_node, field_material = None, None
-    nodes_tbl = root.raw("nodes", {})
-    if not isinstance(nodes_tbl, dict):
-        raise root.error("nodes", "must be a table of named node tables")
     ft = root.table("field", None)
     if ft is not None:
-        builder = NodeBuilder(nodes_tbl, path, base_dir)
         field_node = builder.build(ft.raw("root"), ft, "root")
         field_material = ft.string("material", "default")
         if field_material not in materials:
@@ -272,12 +290,14 @@ def parse_scene(data: dict, path) -> SceneDescription:
             raise ft.error("root", "the field is unbounded (a plane or noise at the root): "
                                    "intersect it with a box")
         ft.finish()
-        unused = sorted(set(nodes_tbl) - set(builder.built))
-        if unused:
-            raise SceneError(path, f"nodes.{unused[0]}", "is defined but never used by field.root")
+    unused = sorted(set(nodes_tbl) - set(builder.built))
+    if unused:
+        raise SceneError(path, f"nodes.{unused[0]}", "is defined but used by neither field.root "
+                                                     "nor a material mask")
     if field_node is None and not meshes:
         raise root.error("field", "the scene has no geometry: add [field] or [[meshes]]")
     root.finish()
     return SceneDescription(file=path, name=name, description=description, render=settings,
-                            camera=camera, lights=lights, materials=materials, meshes=meshes,
+                            camera=camera, lights=lights, materials=materials,
+                            material_masks=material_masks, meshes=meshes,
                             field=field_node, field_material=field_material)
