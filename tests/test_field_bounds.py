@@ -131,12 +131,15 @@ def test_no_matter_outside_bounds(name):
         assert np.all(f[outside] <= -dist[outside] + 1e-4)
 
 
-def test_culling_keeps_values_near_surfaces():
+@pytest.mark.parametrize("tol", [1e-3, 0.05, 0.3])
+def test_culling_keeps_values_near_surfaces(tol):
+    """Within the tolerance a tracer declares (hits, gradient taps), culled and
+    exact trees agree; farther away they may differ (that is the point)."""
     node = F.Blend(NODES["heightfield"], NODES["displace"], radius=0.5)
-    culled = with_culling(node, 1e-3)
+    culled = with_culling(node, tol)
     assert any(n.kind == "culled" for n in culled.walk())
-    pts = random_points(100_000, -5, 5, seed=2)
+    pts = random_points(400_000, -5, 5, seed=2)
     f = F.evaluate(node, pts)
-    near = np.abs(f) < 0.5
+    near = np.abs(f) <= tol
     fc, _ = culled.eval_bounds(_points(pts[near]), ())
     np.testing.assert_allclose(fc.numpy(), f[near], atol=1e-5)

@@ -9,9 +9,15 @@ not the subtree's, but it cannot change what a tracer decides:
 
 * a hit needs the root value near 0, while ``f' < -T`` and ``T`` exceeds the hit
   tolerance;
-* near any surface of the rest of the tree (value ``>= -k``), ``f'`` and the true
-  value both lie more than the largest blend radius ``k`` below it, so unions,
-  blends, intersections and differences return the same number.
+* near any surface of the rest of the tree (value ``>= -tol``), ``f'`` and the
+  true value both lie at least the largest blend radius ``k`` below it when
+  ``T >= k + tol``, so unions, blends, intersections and differences return the
+  same number.
+
+Displacements and domain warps are also culled by value: where the child's own
+value proves the result below ``-T`` (``f_child + max_offset < -T``), the noise is
+skipped and ``f' = f_child + max_offset`` is returned, by the same argument. This
+follows the shape instead of its box.
 
 Dr.Jit's symbolic ``if_stmt`` skips a branch for a whole SIMD packet when no lane
 takes it, so rays far from a noisy arch do not pay for its noise.
@@ -91,7 +97,7 @@ def with_culling(root: Node, tolerance: float) -> Node:
     Node
         A tree with the same field values near every surface.
     """
-    margin = 2.0 * _max_blend_radius(root) + 2.0 * tolerance + 1e-3
+    margin = _max_blend_radius(root) + 2.0 * tolerance + 1e-3
 
     def visit(node: Node, is_root: bool) -> Node:
         new = node
@@ -102,6 +108,9 @@ def with_culling(root: Node, tolerance: float) -> Node:
                 new.children = kids
         lo, hi = node.bounds()
         bounded = np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))
+        if hasattr(node, "skip_margin"):
+            new = copy.copy(new) if new is node else new
+            new.skip_margin = margin
         if not is_root and bounded and node.unit_falloff and node.cost >= CULL_COST:
             return Culled(new, margin)
         return new

@@ -106,11 +106,20 @@ class Displace(_FbmParams, Node):
     def eval(self, p):
         return self.children[0].eval(p) + self.amplitude * self._fbm(p)
 
+    #: Set by :func:`~arches_render.field.culling.with_culling`: skip the noise where
+    #: the result is certainly below ``-skip_margin`` (None: never skip).
+    skip_margin = None
+
     def eval_bounds(self, p, levels, direction=None):
         # {f >= -c} lies inside {f_child >= -c - max_offset}.
         import drjit as dr
         fc, dc = self.children[0].eval_bounds(p, tuple(c + self.max_offset for c in levels), direction)
-        f = fc + self.amplitude * self._fbm(p)
+        if self.skip_margin is None:
+            f = fc + self.amplitude * self._fbm(p)
+        else:
+            f = dr.if_stmt((p, fc), fc + self.max_offset >= -self.skip_margin,
+                           lambda p, fc: fc + self.amplitude * self._fbm(p),
+                           lambda p, fc: fc + self.max_offset, label="displace_skip")
         return f, tuple(dr.maximum(a, b) for a, b in zip(dc, hart_bounds(f, levels, self.lipschitz)))
 
     def bounds(self):
