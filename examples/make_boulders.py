@@ -19,7 +19,8 @@ def main(seed: int = 12, count: int = 2000) -> None:
     radius = 0.25 + 0.9 * rng.power(0.35, count)[::-1] ** 2
     ix = ((xy - extent[0]) / (extent[2] - extent[0]) * 160).astype(int)
     z = heights[ix[:, 1], ix[:, 0]]
-    # Sink each boulder by a third of its size; elongate some along a random axis.
+    # Centres sit 0.35 r above the ground: boulders are about two thirds buried.
+    # Some are elongated along a random, mostly horizontal axis.
     centre = np.c_[xy, z + radius * 0.35]
     axis = rng.normal(size=(count, 3)) * radius[:, None] * rng.uniform(0.0, 0.8, (count, 1))
     axis[:, 2] *= 0.3

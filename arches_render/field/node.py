@@ -39,7 +39,7 @@ import numpy as np
 from ..backend import variant
 
 
-def opaque_float(value) -> "mi.Float":
+def opaque_float(value):
     """A scalar parameter as an opaque ``mi.Float`` (edited without recompiling)."""
     variant()
     import drjit as dr
@@ -47,7 +47,7 @@ def opaque_float(value) -> "mi.Float":
     return dr.opaque(mi.Float, float(value))
 
 
-def opaque_point(value) -> "mi.Point3f":
+def opaque_point(value):
     """A 3-vector parameter as an opaque ``mi.Point3f``."""
     variant()
     import drjit as dr

@@ -34,6 +34,9 @@ from .noise import fbm, fbm_lipschitz, fbm_range
 class _FbmParams:
     """Shared fBm parameters: amplitude, wavelength, octaves, lacunarity, gain, seed."""
 
+    #: fBm fields evaluated per point (a domain warp needs three).
+    noise_fields = 1
+
     def _init_fbm(self, amplitude, wavelength, octaves, lacunarity, gain, seed):
         import drjit as dr
         import mitsuba as mi
@@ -60,7 +63,7 @@ class _FbmParams:
     @property
     def cost(self) -> float:
         # One octave of gradient noise costs about six capsules.
-        return 6.0 * self.octaves * (3 if isinstance(self, DomainWarp) else 1) + sum(
+        return 6.0 * self.octaves * self.noise_fields + sum(
             c.cost for c in self.children)
 
     @property
@@ -135,6 +138,7 @@ class DomainWarp(_FbmParams, Node):
     """Child evaluated at ``p + a W(p / lambda)`` (see module docstring)."""
 
     kind = "warp"
+    noise_fields = 3
 
     def __init__(self, child, amplitude=1.0, wavelength=1.0, octaves=3, lacunarity=2.0, gain=0.5,
                  seed=0):

@@ -63,13 +63,10 @@ class SphereTracer:
         self.lo, self.hi = [float(v) - pad for v in lo], [float(v) + pad for v in hi]
         self.scale = float(np.linalg.norm(np.asarray(self.hi) - np.asarray(self.lo)))
         from ..field.culling import with_culling
-        self.source = field
         # Culling must keep values exact wherever the tracer looks closely: hits
         # (|f| < eps t) and gradient taps (h <= eps t / 2 away, so |f| grows by at
         # most L sqrt(3) h); t is bounded by the box's diagonal.
         self.field = with_culling(field, eps * self.scale * (1.0 + float(field.lipschitz)))
-        self.L = float(field.lipschitz)
-        self.inv_L = dr.opaque(mi.Float, 1.0 / self.L)
         self.eps = dr.opaque(mi.Float, eps)
         self.omega = float(omega)
         self.max_steps = int(max_steps)
