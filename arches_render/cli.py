@@ -13,63 +13,9 @@ import time
 from pathlib import Path
 
 from . import __version__
+from .commands import Progress, UsageError, bounded_int, discover, positive_float, resolution
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
-
-
-class UsageError(ValueError):
-    """A bad command-line value (message is the one line shown)."""
-
-
-def _resolution(text: str):
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--resolution must be WxH, e.g. 640x360 (got {text!r})") from None
-    if not (1 <= w <= 16384 and 1 <= h <= 16384):
-        raise argparse.ArgumentTypeError(f"--resolution width and height must be in [1, 16384] (got {text!r})")
-    return w, h
-
-
-def _bounded_int(name, lo, hi):
-    def parse(text):
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} must be an integer in [{lo}, {hi}] (got {text!r})") from None
-        if not lo <= v <= hi:
-            raise argparse.ArgumentTypeError(f"{name} must be an integer in [{lo}, {hi}] (got {v})")
-        return v
-    return parse
-
-
-def _positive_float(name):
-    def parse(text):
-        try:
-            v = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} must be a number > 0 (got {text!r})") from None
-        if not v > 0:
-            raise argparse.ArgumentTypeError(f"{name} must be a number > 0 (got {text!r})")
-        return v
-    return parse
-
-
-class Progress:
-    """A ``progress(done, total)`` callback drawing a tqdm bar on stderr."""
-
-    def __init__(self, desc, unit, quiet):
-        from tqdm import tqdm
-        self.bar = tqdm(total=None, desc=desc, unit=unit, disable=quiet, file=sys.stderr,
-                        leave=True, dynamic_ncols=True)
-
-    def __call__(self, done, total):
-        if self.bar.total != total:
-            self.bar.total = total
-        self.bar.update(done - self.bar.n)
-
-    def close(self):
-        self.bar.close()
 
 
 def cmd_render(args) -> int:
@@ -166,26 +112,29 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("render", help="render a scene to a half-float EXR and a PNG preview")
     r.add_argument("scene", help="scene file (.toml)")
     r.add_argument("-o", "--output", help="output EXR (default out/SCENE.exr); the PNG goes beside it")
-    r.add_argument("--spp", type=_bounded_int("--spp", 1, 1 << 20), help="samples per pixel")
-    r.add_argument("--resolution", type=_resolution, help="WxH, e.g. 640x360")
-    r.add_argument("--seed", type=_bounded_int("--seed", 0, 2 ** 31 - 1), help="sampler seed")
+    r.add_argument("--spp", type=bounded_int("--spp", 1, 1 << 20), help="samples per pixel")
+    r.add_argument("--resolution", type=resolution, help="WxH, e.g. 640x360")
+    r.add_argument("--seed", type=bounded_int("--seed", 0, 2 ** 31 - 1), help="sampler seed")
     r.add_argument("--geometry", choices=("field", "mesh"),
                    help="sphere-trace the field (default) or render its marching-cubes mesh")
-    r.add_argument("--passes", type=_bounded_int("--passes", 1, 4096), help="sample passes")
-    r.add_argument("--voxel", type=_positive_float("--voxel"), help="mesh mode voxel size (m)")
+    r.add_argument("--passes", type=bounded_int("--passes", 1, 4096), help="sample passes")
+    r.add_argument("--voxel", type=positive_float("--voxel"), help="mesh mode voxel size (m)")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     r.set_defaults(func=cmd_render)
 
     m = sub.add_parser("mesh", help="polygonize the scene's field (marching cubes)")
     m.add_argument("scene", help="scene file (.toml)")
     m.add_argument("-o", "--output", required=True, help="output mesh (.ply, .obj or .glb)")
-    m.add_argument("--voxel", type=_positive_float("--voxel"), help="voxel size in metres")
+    m.add_argument("--voxel", type=positive_float("--voxel"), help="voxel size in metres")
     m.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     m.set_defaults(func=cmd_mesh)
 
     i = sub.add_parser("info", help="print the scene's field: node count, bounds, memory")
     i.add_argument("scene", help="scene file (.toml)")
     i.set_defaults(func=cmd_info)
+
+    for module in discover():
+        module.register(sub)
     return p
 
 

@@ -2,6 +2,12 @@
 
     python benchmarks/run.py [--json] [--repeat N] [NAME ...]
 
+This file holds the foundation's benchmarks. Each generator keeps its own in
+``benchmarks/bench_TOPIC.py``, which defines ``BENCHMARKS = {name: (fn, repeat)}``
+with ``fn(repeat) -> dict(value, unit, baseline, baseline_is, ...)`` and documents
+its figures in its docstring; they are collected here in file-name order. Names
+are stable: scripts and notes refer to them.
+
 Figures (medians over ``--repeat`` runs, warm kernels unless stated):
 
 ``field_evals_tree20``   M evals/s of a ~20-node tree (heightfield, blends, capsules,
@@ -33,28 +39,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-
-def _timed_eval(fn, points, repeat):
-    """Median seconds of ``fn(points)`` with kernels compiled (one warm-up)."""
-    import drjit as dr
-    import mitsuba as mi
-    times = []
-    for i in range(repeat + 1):
-        # An opaque offset makes each run a new computation of the same kernel.
-        p = points + dr.opaque(mi.Float, 1e-6 * i)
-        t = time.perf_counter()
-        v = fn(p)
-        dr.eval(v)
-        dr.sync_thread()
-        if i:
-            times.append(time.perf_counter() - t)
-    return statistics.median(times)
-
-
-def _points(n, lo, hi, seed=0):
-    import mitsuba as mi
-    pts = np.random.default_rng(seed).uniform(lo, hi, (n, 3)).astype(np.float32)
-    return mi.Point3f(*(mi.Float(pts[:, i]) for i in range(3)))
+from timing import random_points, timed_eval  # noqa: E402  (benchmarks/ is on sys.path as the script folder)
 
 
 def tree20():
@@ -74,7 +59,7 @@ def tree20():
 def bench_field_evals_tree20(repeat):
     node = tree20()
     n = 1 << 21
-    t = _timed_eval(node.eval, _points(n, [-50, -50, -5], [50, 50, 30]), repeat)
+    t = timed_eval(node.eval, random_points(n, [-50, -50, -5], [50, 50, 30]), repeat)
     return dict(value=n / t / 1e6, unit="M evals/s", baseline=80.0, baseline_is="goal",
                 nodes=node.count())
 
@@ -90,7 +75,7 @@ def bench_field_evals_set10k(repeat):
     r = rng.uniform(0.3, 1.2, 10_000)
     node = F.CapsuleSet(a, b, r)
     n = 1 << 21
-    t = _timed_eval(node.eval, _points(n, [-100, -100, -10], [100, 100, 10]), repeat)
+    t = timed_eval(node.eval, random_points(n, [-100, -100, -10], [100, 100, 10]), repeat)
     # Baseline: the same capsules looped over without the grid (fewer points).
     A = [mi.Float(a[:, i].astype(np.float32)) for i in range(3)]
     B = [mi.Float(b[:, i].astype(np.float32)) for i in range(3)]
@@ -106,7 +91,7 @@ def bench_field_evals_set10k(repeat):
         return dr.while_loop((mi.UInt32(0), mi.Float(-1e30) + 0 * p.x), lambda i, f: i < len(r), body)[1]
 
     m = 1 << 13
-    tb = _timed_eval(brute, _points(m, [-100, -100, -10], [100, 100, 10]), max(1, repeat // 2))
+    tb = timed_eval(brute, random_points(m, [-100, -100, -10], [100, 100, 10]), max(1, repeat // 2))
     return dict(value=n / t / 1e6, unit="M evals/s", baseline=m / tb / 1e6, baseline_is="brute-force loop",
                 goal=20.0, cells=int(np.prod(node.res)), max_per_cell=node.max_per_cell)
 
@@ -158,19 +143,35 @@ BENCHMARKS = {
 }
 
 
+def all_benchmarks() -> dict:
+    """The benchmarks above and those of every ``benchmarks/bench_*.py``."""
+    import importlib.util
+    found = dict(BENCHMARKS)
+    for path in sorted(Path(__file__).parent.glob("bench_*.py")):
+        spec = importlib.util.spec_from_file_location(f"arches_benchmarks.{path.stem}", path)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        for name, entry in module.BENCHMARKS.items():
+            if name in found:
+                raise RuntimeError(f"benchmark {name!r} of {path.name} is already defined")
+            found[name] = entry
+    return found
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("names", nargs="*", metavar="NAME", help=f"benchmarks to run (default: all): {', '.join(BENCHMARKS)}")
+    p.add_argument("names", nargs="*", metavar="NAME", help="benchmarks to run (default: all)")
     p.add_argument("--json", action="store_true", help="one JSON object a line")
     p.add_argument("--repeat", type=int, default=0, help="repetitions (default: per benchmark)")
     args = p.parse_args(argv)
-    unknown = [n for n in args.names if n not in BENCHMARKS]
+    benchmarks = all_benchmarks()
+    unknown = [n for n in args.names if n not in benchmarks]
     if unknown:
-        p.error(f"unknown benchmark {unknown[0]!r} (choose from {', '.join(BENCHMARKS)})")
+        p.error(f"unknown benchmark {unknown[0]!r} (choose from {', '.join(benchmarks)})")
     from arches_render import backend
     backend.set_variant()
-    for name in args.names or BENCHMARKS:
-        fn, default_repeat = BENCHMARKS[name]
+    for name in args.names or benchmarks:
+        fn, default_repeat = benchmarks[name]
         res = fn(args.repeat or default_repeat)
         res["ratio"] = res["value"] / res["baseline"]
         if args.json:

@@ -29,6 +29,11 @@ displace               child + the noise keys: child's field plus fBm
 warp                   child + the noise keys (octaves = 3): domain warp
 capsule_set            file (.npz with a, b, radius) or inline a, [b = a], radius
 =====================  ==================================================================
+
+Generators add node types of their own: a module ``scene_nodes.py`` in a
+sub-package of ``generators/`` (for example ``generators/terrain/scene_nodes.py``)
+defines ``NODE_TYPES = {name: build(table, builder) -> Node}`` and documents its
+keys in the same kind of table; :func:`node_types` merges them with the ones above.
 """
 
 from __future__ import annotations
@@ -154,6 +159,40 @@ NODE_TYPES = {
 }
 
 
+def _extension_node_types() -> dict:
+    """``NODE_TYPES`` of every ``generators/*/scene_nodes.py``; a name defined twice is a bug."""
+    import importlib
+    import pkgutil
+
+    from .. import generators
+    found = {}
+    for pkg in sorted(pkgutil.iter_modules(generators.__path__), key=lambda m: m.name):
+        if not pkg.ispkg:
+            continue
+        try:
+            module = importlib.import_module(f"{generators.__name__}.{pkg.name}.scene_nodes")
+        except ModuleNotFoundError as exc:
+            if exc.name != f"{generators.__name__}.{pkg.name}.scene_nodes":
+                raise
+            continue
+        for name, build in module.NODE_TYPES.items():
+            if name in NODE_TYPES or name in found:
+                raise RuntimeError(f"node type {name!r} of {module.__name__} is already defined")
+            found[name] = build
+    return found
+
+
+_ALL_NODE_TYPES: dict | None = None
+
+
+def node_types() -> dict:
+    """All node types: the core ones of this module and those of the generators."""
+    global _ALL_NODE_TYPES
+    if _ALL_NODE_TYPES is None:
+        _ALL_NODE_TYPES = {**NODE_TYPES, **_extension_node_types()}
+    return _ALL_NODE_TYPES
+
+
 def _scale_factor(t: Table):
     v = t.raw("factor")
     if isinstance(v, (int, float)) and not isinstance(v, bool):
@@ -194,9 +233,10 @@ class NodeBuilder:
         return node
 
     def node(self, t: Table) -> F.Node:
-        kind = t.string("type", choices=set(NODE_TYPES))
+        types = node_types()
+        kind = t.string("type", choices=set(types))
         try:
-            node = NODE_TYPES[kind](t, self)
+            node = types[kind](t, self)
         except SceneError:
             raise
         except ValueError as exc:  # a constructor's own check: name the node

@@ -1,0 +1,1 @@
+"""Topological terrain evolution on 3-G-maps (topological-gmaps-evolution)."""

@@ -1,0 +1,1 @@
+"""Layered terrain: material stacks, convolution surface, stabilization and editing tools (arches-layered-terrain-2009)."""
