@@ -22,9 +22,15 @@ PASS_SPP = 16
 MAX_PASSES = 4096
 
 
-def sensor_dict(desc, width, height) -> dict:
+def sensor_dict(desc, width, height, crop=None) -> dict:
+    """Perspective camera of the scene; ``crop = (x0, y0, w, h)`` renders a window only."""
     import mitsuba as mi
     cam = desc.camera
+    film = {"type": "hdrfilm", "width": int(width), "height": int(height),
+            "pixel_format": "rgb", "rfilter": {"type": "box"}}
+    if crop is not None:
+        x0, y0, w, h = (int(v) for v in crop)
+        film.update(crop_offset_x=x0, crop_offset_y=y0, crop_width=w, crop_height=h)
     return {
         "type": "perspective",
         "fov": cam.fov,
@@ -33,8 +39,7 @@ def sensor_dict(desc, width, height) -> dict:
         "far_clip": 1e5,
         "to_world": mi.ScalarTransform4f().look_at(origin=cam.origin, target=cam.target, up=cam.up),
         "sampler": {"type": "independent"},
-        "film": {"type": "hdrfilm", "width": int(width), "height": int(height),
-                 "pixel_format": "rgb", "rfilter": {"type": "box"}},
+        "film": film,
     }
 
 
@@ -72,7 +77,8 @@ def load_materials(desc) -> dict:
     return bsdfs
 
 
-def build_scene(desc, geometry=None, width=None, height=None, voxel=None, progress=None):
+def build_scene(desc, geometry=None, width=None, height=None, voxel=None, progress=None,
+                aovs=False, crop=None, bsdfs=None):
     """Assemble the Mitsuba scene of a :class:`SceneDescription`.
 
     Parameters
@@ -86,6 +92,15 @@ def build_scene(desc, geometry=None, width=None, height=None, voxel=None, progre
         Marching-cubes voxel in mesh mode.
     progress : callable, optional
         ``progress(done, total)`` while polygonizing.
+    aovs : bool, optional
+        Render the AOVs of :mod:`arches_render.render.aovs` besides the beauty
+        (read them with :func:`render_layers`). Mesh mode then renders with
+        ``implicit_path`` without a field, the same estimator as ``path``.
+    crop : (x0, y0, w, h), optional
+        Render only this window of the image (a tile).
+    bsdfs : dict, optional
+        The materials as built by :func:`load_materials` (shared with the caller,
+        who may edit them later); default: built here.
 
     Returns
     -------
@@ -96,20 +111,27 @@ def build_scene(desc, geometry=None, width=None, height=None, voxel=None, progre
     s = desc.render
     geometry = geometry or s.geometry
     d = {"type": "scene",
-         "sensor": sensor_dict(desc, width or s.width, height or s.height)}
-    bsdfs = load_materials(desc)
+         "sensor": sensor_dict(desc, width or s.width, height or s.height, crop)}
+    bsdfs = load_materials(desc) if bsdfs is None else bsdfs
     for i, light in enumerate(desc.lights):
         d[f"light{i}"] = light
     for i, mesh in enumerate(desc.meshes):
         d[f"mesh{i}"] = dict(mesh, bsdf=bsdfs[mesh["bsdf"]["id"]])
+    # Rock piles: flat meshes with baked transforms, tiles built or loaded from their cache.
+    for j, pile in enumerate(getattr(desc, "rock_piles", ())):
+        for k, shape in enumerate(pile.shapes(bsdfs)):
+            d[f"rock_pile{j}_{k}"] = shape
     field_bsdf = bsdfs[desc.field_material] if desc.field is not None else None
     if geometry == "mesh" or desc.field is None:
-        d["integrator"] = {"type": "path", "max_depth": s.max_depth, "rr_depth": s.rr_depth}
+        d["integrator"] = {"type": "implicit_path" if aovs else "path", "max_depth": s.max_depth,
+                           "rr_depth": s.rr_depth}
+        if aovs:
+            d["integrator"]["aovs"] = True
         if desc.field is not None:
             d["field_mesh"], _ = field_mesh_shape(desc, field_bsdf, voxel, progress)
         return mi.load_dict(d)
     d["integrator"] = {"type": "implicit_path", "max_depth": s.max_depth, "rr_depth": s.rr_depth,
-                       "eps": s.eps, "omega": s.omega}
+                       "eps": s.eps, "omega": s.omega, "aovs": bool(aovs)}
     scene = mi.load_dict(d)
     scene.integrator().attach(desc.field, field_bsdf)
     return scene
@@ -121,6 +143,51 @@ def plan_passes(spp: int, passes: int = 0) -> list[int]:
     n = max(1, min(n, spp, MAX_PASSES))
     base, extra = divmod(spp, n)
     return [base + (1 if i < extra else 0) for i in range(n)]
+
+
+def pass_seed(seed: int, i: int, stream: int = 0) -> int:
+    """Sampler seed of pass ``i`` of sample stream ``stream``: ``seed * 4096 + i`` for stream 0.
+
+    A stream is a turntable frame or an image tile. Other streams mix their
+    index in with a Weyl step (golden-ratio constant), so that each draws its own
+    sequence and the result does not depend on where or in which order frames
+    and tiles were rendered.
+    """
+    base = int(seed) * MAX_PASSES + int(i)
+    return base if stream == 0 else (base + int(stream) * 0x9E3779B9) & 0xFFFFFFFF
+
+
+def render_layers(scene, spp: int, seed: int = 0, passes: int = 0, progress=None, stream: int = 0):
+    """Render the beauty and the integrator's AOVs, averaged over passes.
+
+    Parameters
+    ----------
+    scene : mi.Scene
+        Built with ``aovs=True`` for AOVs (otherwise the layers are empty).
+    spp, seed, passes, progress
+        As for :func:`render_image`.
+    stream : int, optional
+        Sample stream (frame or tile index) mixed into the pass seeds (:func:`pass_seed`).
+
+    Returns
+    -------
+    (numpy.ndarray, dict)
+        ``(H, W, 3)`` float32 beauty and ``{layer: (array, channel letters)}``
+        (see :func:`arches_render.render.aovs.split_channels`).
+    """
+    import mitsuba as mi
+
+    from .aovs import split_channels
+    names = list(scene.integrator().aov_names())
+    acc, done = None, 0
+    for i, n in enumerate(plan_passes(spp, passes)):
+        img = mi.render(scene, spp=n, seed=pass_seed(seed, i, stream)).numpy().astype(np.float64)
+        acc = img * n if acc is None else acc + img * n
+        done += n
+        if progress:
+            progress(done, spp)
+    rgb, layers = split_channels((acc / spp).astype(np.float32), names)
+    return rgb, layers
 
 
 def render_image(scene, spp: int, seed: int = 0, passes: int = 0, progress=None) -> np.ndarray:
@@ -147,7 +214,7 @@ def render_image(scene, spp: int, seed: int = 0, passes: int = 0, progress=None)
     acc = None
     done = 0
     for i, n in enumerate(plan):
-        img = mi.render(scene, spp=n, seed=seed * MAX_PASSES + i).numpy().astype(np.float64)
+        img = mi.render(scene, spp=n, seed=pass_seed(seed, i)).numpy().astype(np.float64)
         acc = img * n if acc is None else acc + img * n
         done += n
         if progress:

@@ -27,7 +27,8 @@ import numpy as np
 
 
 def ray_box(o, d, lo, hi):
-    """Slab test: entry and exit distances of the ray ``o + t d`` through ``[lo, hi]``."""
+    """Slab test: entry and exit distances of the ray ``o + t d`` through ``[lo, hi]``
+    (``lo``, ``hi``: three floats or three ``mi.Float``)."""
     import drjit as dr
     import mitsuba as mi
     inv = dr.rcp(d)
@@ -67,6 +68,11 @@ class SphereTracer:
         # (|f| < eps t) and gradient taps (h <= eps t / 2 away, so |f| grows by at
         # most L sqrt(3) h); t is bounded by the box's diagonal.
         self.field = with_culling(field, eps * self.scale * (1.0 + float(field.lipschitz)))
+        # Opaque copies for the kernels: a field whose parameters move its box
+        # (a lookdev edit) re-uses the compiled kernels.
+        self.lo_op = [dr.opaque(mi.Float, v) for v in self.lo]
+        self.hi_op = [dr.opaque(mi.Float, v) for v in self.hi]
+        self.scale_op = dr.opaque(mi.Float, self.scale)
         self.eps = dr.opaque(mi.Float, eps)
         self.omega = float(omega)
         self.max_steps = int(max_steps)
@@ -81,7 +87,7 @@ class SphereTracer:
         """
         import drjit as dr
         import mitsuba as mi
-        t_in, t_out = ray_box(o, d, self.lo, self.hi)
+        t_in, t_out = ray_box(o, d, self.lo_op, self.hi_op)
         t_start = dr.maximum(t_in, 0.0)
         t_end = dr.minimum(t_out, tmax)
         active = mi.Bool(active) & (t_start <= t_end)
@@ -131,7 +137,7 @@ class SphereTracer:
         """
         import drjit as dr
         from ..field import gradient
-        h = dr.maximum(1e-5 * self.scale, 0.5 * self.eps * t)
+        h = dr.maximum(1e-5 * self.scale_op, 0.5 * self.eps * t)
         g = gradient(self.field, p, h, culled=True)
         f = self.field.eval_bounds(p, ())[0]
         g2 = dr.squared_norm(g)

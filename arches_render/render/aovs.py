@@ -1,0 +1,128 @@
+"""Arbitrary output variables (AOVs) of the primary hit, as EXR layers.
+
+The ``implicit_path`` integrator (with ``aovs = true``) returns, per sample, the
+following values of the first surface the camera ray meets (mesh or field), and
+the film averages them over the pixel like the beauty (box filter):
+
+===============  ========================  ================================================
+layer            channels                  value (0 where the ray escapes)
+===============  ========================  ================================================
+``albedo``       R, G, B                   diffuse reflectance ``rho`` of the BSDF at the hit
+                                           (for ``triplanar``: ``sum_i w_i a_i``), linear
+``normal``       X, Y, Z                   world-space shading normal (unit length where a
+                                           pixel holds one surface)
+``depth``        Z                         distance from the camera centre to the hit, metres
+``position``     X, Y, Z                   world position of the hit, metres
+``coverage``     field, mesh               1 where the hit is on the field / on a mesh
+``layers``       one per material layer    composite weight ``w_i`` of each layer of the
+                                           field's triplanar material (sums to 1 on the field)
+===============  ========================  ================================================
+
+Pixels on a silhouette hold the average of the surfaces they see (a normal there
+is shorter than 1, a depth between two distances): these are the usual
+"filtered" AOVs that a compositor and a denoiser expect.
+
+References
+----------
+Jakob, W. et al. (2022). Mitsuba 3 renderer, ``aov`` integrator (same definitions
+of ``albedo``, ``sh_normal``, ``depth`` and ``position``).
+Kainz, F. et al. "Technical Introduction to OpenEXR" (layer.channel naming).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["BASE_LAYERS", "aov_channel_names", "primary_aovs", "split_channels", "layer_names_of"]
+
+#: Layers every AOV render has, with their channel letters.
+BASE_LAYERS = (("albedo", ("R", "G", "B")), ("normal", ("X", "Y", "Z")), ("depth", ("Z",)),
+               ("position", ("X", "Y", "Z")), ("coverage", ("field", "mesh")))
+
+
+def layer_names_of(bsdf) -> list[str]:
+    """Layer names of a triplanar BSDF (``[]`` for other BSDFs or ``None``)."""
+    names = getattr(bsdf, "names", None) if bsdf is not None else None
+    return list(names) if names and hasattr(bsdf, "layer_weights") else []
+
+
+def aov_channel_names(field_bsdf=None) -> list[str]:
+    """Film channel names (``layer.channel``) in the order of :func:`primary_aovs`.
+
+    Parameters
+    ----------
+    field_bsdf : mi.BSDF or None
+        The field's BSDF; a triplanar one adds a ``layers.<name>`` channel per layer.
+
+    Returns
+    -------
+    list of str
+    """
+    out = [f"{layer}.{c}" for layer, letters in BASE_LAYERS for c in letters]
+    return out + [f"layers.{n}" for n in layer_names_of(field_bsdf)]
+
+
+def primary_aovs(si, field_hit, valid, bsdf, field_bsdf=None, depth=None) -> list:
+    """AOV values of a primary hit, one ``mi.Float`` per channel of :func:`aov_channel_names`.
+
+    Parameters
+    ----------
+    si : mi.SurfaceInteraction3f
+        Nearest hit among meshes and field.
+    field_hit : mi.Bool
+        Whether the hit is on the field.
+    valid : mi.Bool
+        Active lanes that hit a surface.
+    bsdf : mi.BSDFPtr
+        BSDF at the hit.
+    field_bsdf : mi.BSDF or None
+        The field's BSDF (for the layer weights).
+    depth : mi.Float, optional
+        Distance from the camera centre (default ``si.t``, the distance from
+        the ray origin, which a perspective camera puts on its near plane).
+
+    Returns
+    -------
+    list of mi.Float
+    """
+    import drjit as dr
+    import mitsuba as mi
+    zero = mi.Float(0.0)
+    albedo = dr.select(valid, mi.Color3f(bsdf.eval_diffuse_reflectance(si, valid)), mi.Color3f(0.0))
+    n = dr.select(valid, si.sh_frame.n, mi.Vector3f(0.0))
+    t = dr.select(valid, si.t if depth is None else depth, zero)
+    p = dr.select(valid, si.p, mi.Point3f(0.0))
+    on_field = valid & field_hit
+    out = [albedo.x, albedo.y, albedo.z, n.x, n.y, n.z, t, p.x, p.y, p.z,
+           dr.select(on_field, 1.0, zero), dr.select(valid & ~field_hit, 1.0, zero)]
+    if layer_names_of(field_bsdf):
+        out += [dr.select(on_field, w, zero) for w in field_bsdf.layer_weights(si, on_field)]
+    return out
+
+
+def split_channels(image: np.ndarray, aov_names) -> tuple[np.ndarray, dict]:
+    """Split a film's ``(H, W, 3 + len(aov_names))`` output into beauty and layers.
+
+    Parameters
+    ----------
+    image : numpy.ndarray
+        Developed film: R, G, B, then the AOV channels in ``aov_names`` order.
+    aov_names : sequence of str
+        ``layer.channel`` names (see :func:`aov_channel_names`).
+
+    Returns
+    -------
+    (numpy.ndarray, dict)
+        The ``(H, W, 3)`` beauty and ``{layer: (array (H, W, C), channel letters)}``,
+        the form :func:`arches_render.imaging.exr.write_exr` takes.
+    """
+    image = np.asarray(image)
+    if image.shape[2] != 3 + len(aov_names):
+        raise ValueError(f"film has {image.shape[2]} channels, expected 3 + {len(aov_names)} AOVs")
+    layers: dict[str, tuple[list, list]] = {}
+    for i, name in enumerate(aov_names):
+        layer, _, letter = name.partition(".")
+        arrs, letters = layers.setdefault(layer, ([], []))
+        arrs.append(image[..., 3 + i])
+        letters.append(letter)
+    return image[..., :3], {k: (np.stack(a, axis=-1), tuple(c)) for k, (a, c) in layers.items()}

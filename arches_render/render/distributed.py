@@ -1,0 +1,212 @@
+"""Scale-out on Dask distributed: turntable frames, image tiles and golden renders.
+
+Work is a list of :class:`~arches_render.render.jobs.RenderJob` (picklable: a scene
+*path* and numbers). Workers run :func:`~arches_render.render.jobs.run_job`, the
+function a serial run calls, and send back the pixels; the client writes every
+file, so a remote cluster needs the scene files (same path) but no shared output
+folder. Determinism comes from the jobs: a frame or a tile has its own sample
+stream (:func:`arches_render.render.renderer.pass_seed`), and the box filter
+makes a render bitwise reproducible, so the gathered files hold the same bits as
+a serial run.
+
+By default :func:`dask_client` starts a :class:`dask.distributed.LocalCluster` of
+worker *processes* (Dr.Jit's LLVM backend and Mitsuba's scene state are per
+process) with one thread each; ``scheduler`` connects to an existing cluster
+instead (``tcp://host:8786``).
+
+References
+----------
+Rocklin, M. (2015). Dask: parallel computation with blocked algorithms and task
+scheduling. Proc. 14th Python in Science Conference. ``dask.distributed``:
+https://distributed.dask.org
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from typing import Iterator, Sequence
+
+import numpy as np
+
+from .jobs import RenderJob, run_job
+
+__all__ = ["dask_client", "map_jobs", "tile_grid", "render_tiled", "regenerate_goldens"]
+
+
+@contextlib.contextmanager
+def dask_client(scheduler: str | None = None, workers: int | None = None) -> Iterator:
+    """A Dask client: on ``scheduler``, or on a new LocalCluster of ``workers`` processes.
+
+    Parameters
+    ----------
+    scheduler : str, optional
+        Address of a running scheduler (``tcp://host:8786``).
+    workers : int, optional
+        Worker processes of the LocalCluster (default: the CPU count), one
+        thread each.
+
+    Yields
+    ------
+    dask.distributed.Client
+    """
+    import logging
+
+    from dask.distributed import Client, LocalCluster
+    if scheduler:
+        client = Client(scheduler)
+        try:
+            yield client
+        finally:
+            client.close()
+        return
+    n = int(workers or os.cpu_count() or 1)
+    # The default logging reports every worker start and stop on stderr.
+    logging.getLogger("distributed").setLevel(logging.WARNING)
+    with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                      silence_logs=logging.WARNING) as cluster, Client(cluster) as client:
+        yield client
+
+
+def _threads_per_worker(client) -> int:
+    # Dr.Jit would start one thread per core in every worker process; split the
+    # cores of each host between its workers instead (the fewest over hosts).
+    info = client.scheduler_info().get("workers", {})
+    cores = client.run(os.cpu_count)  # {worker address: cores of its host}
+    hosts: dict[str, int] = {}
+    for w in info.values():
+        hosts[w.get("host", "")] = hosts.get(w.get("host", ""), 0) + 1
+    per = [int(cores.get(addr) or 1) // hosts[w.get("host", "")] for addr, w in info.items()]
+    return max(1, min(per, default=1))
+
+
+def map_jobs(client, jobs: Sequence[RenderJob], keys: Sequence | None = None):
+    """Run jobs on the cluster; yield ``(key, (rgb, layers))`` as results arrive.
+
+    Parameters
+    ----------
+    client : dask.distributed.Client
+    jobs : sequence of RenderJob
+    keys : sequence, optional
+        What to yield with each result (default: the job's position).
+
+    Yields
+    ------
+    (key, (numpy.ndarray, dict))
+    """
+    from dask.distributed import as_completed
+    keys = list(range(len(jobs))) if keys is None else list(keys)
+    threads = _threads_per_worker(client)
+    jobs = [j if j.threads else j.with_(threads=threads) for j in jobs]
+    futures = client.map(run_job, jobs, pure=False)
+    index = {f.key: i for i, f in enumerate(futures)}
+    for fut, result in as_completed(futures, with_results=True):
+        yield keys[index[fut.key]], result
+
+
+def tile_grid(width: int, height: int, tiles: int) -> list[tuple[int, int, int, int]]:
+    """Split an image into about ``tiles`` rectangles ``(x0, y0, w, h)``, row-major.
+
+    The grid has ``ny = round(sqrt(tiles * h / w))`` rows and ``ceil(tiles / ny)``
+    columns, clamped to the image; edges are split as evenly as integers allow.
+    """
+    ny = int(min(height, max(1, round(np.sqrt(tiles * height / width)))))
+    nx = int(min(width, max(1, -(-tiles // ny))))
+    xs = np.linspace(0, width, nx + 1).round().astype(int)
+    ys = np.linspace(0, height, ny + 1).round().astype(int)
+    return [(int(xs[i]), int(ys[j]), int(xs[i + 1] - xs[i]), int(ys[j + 1] - ys[j]))
+            for j in range(ny) for i in range(nx)]
+
+
+def render_tiled(job: RenderJob, tiles: int, client=None, progress=None):
+    """Render a still as tiles (on a Dask client or serially) and assemble it.
+
+    Tile ``i`` uses sample stream ``i``, so the image is the same whoever renders
+    the tiles; it differs from an untiled render of the same seed only by noise.
+
+    Parameters
+    ----------
+    job : RenderJob
+        The full-image job (``crop`` and ``stream`` are set per tile).
+    tiles : int
+        About how many tiles.
+    client : dask.distributed.Client, optional
+    progress : callable, optional
+        ``progress(tiles_done, tiles)``.
+
+    Returns
+    -------
+    (numpy.ndarray, dict)
+        Beauty and layers of the whole image.
+    """
+    grid = tile_grid(job.width, job.height, tiles)
+    jobs = [job.with_(crop=c, stream=i) for i, c in enumerate(grid)]
+    rgb = np.zeros((job.height, job.width, 3), np.float32)
+    layers: dict = {}
+
+    def place(i, result):
+        x0, y0, w, h = grid[i]
+        t_rgb, t_layers = result
+        rgb[y0:y0 + h, x0:x0 + w] = t_rgb
+        for name, (arr, letters) in t_layers.items():
+            if name not in layers:
+                layers[name] = (np.zeros((job.height, job.width, arr.shape[2]), np.float32), letters)
+            layers[name][0][y0:y0 + h, x0:x0 + w] = arr
+
+    done = 0
+    results = (((i, run_job(j)) for i, j in enumerate(jobs)) if client is None
+               else map_jobs(client, jobs))
+    for i, result in results:
+        place(i, result)
+        done += 1
+        if progress:
+            progress(done, len(jobs))
+    return rgb, layers
+
+
+def regenerate_goldens(scenes: Sequence, golden_dir, width: int, height: int, ref_spp: int,
+                       test_spp_of, client=None, calib_seeds=(1, 2, 3, 4)) -> list:
+    """Re-create the golden references of scene files, renders spread over a cluster.
+
+    The reference (seed 0, ``ref_spp``) and the calibration renders (``calib_seeds``
+    at the test spp) of every scene are independent jobs; once gathered,
+    :func:`arches_render.imaging.golden.update_golden` stores them exactly as the
+    serial ``pytest --update-goldens`` would (same seeds, same renderer, no AOVs).
+
+    Parameters
+    ----------
+    scenes : sequence of path
+        Scene files; the golden name is the file stem.
+    golden_dir : path
+    width, height, ref_spp : int
+    test_spp_of : callable
+        ``test_spp_of(name) -> int``.
+    client : dask.distributed.Client, optional
+    calib_seeds : sequence of int
+
+    Returns
+    -------
+    list of Golden
+    """
+    from pathlib import Path
+
+    from ..imaging.golden import update_golden
+    jobs, keys = [], []
+    for path in scenes:
+        path = Path(path).resolve()
+        name = path.stem
+        base = RenderJob(scene=str(path), width=width, height=height, spp=ref_spp, aovs=False)
+        jobs.append(base)
+        keys.append((name, 0, ref_spp))
+        for s in calib_seeds:
+            jobs.append(base.with_(seed=int(s), spp=int(test_spp_of(name))))
+            keys.append((name, int(s), int(test_spp_of(name))))
+    results = ({k: run_job(j)[0] for k, j in zip(keys, jobs)} if client is None
+               else {k: r[0] for k, r in map_jobs(client, jobs, keys)})
+    out = []
+    for path in scenes:
+        name = Path(path).stem
+        out.append(update_golden(name, lambda seed, spp, n=name: results[(n, seed, spp)],
+                                 ref_spp=ref_spp, test_spp=int(test_spp_of(name)),
+                                 calib_seeds=calib_seeds, golden_dir=golden_dir))
+    return out

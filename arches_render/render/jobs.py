@@ -1,0 +1,146 @@
+"""Render jobs: picklable units of work (a frame, a tile, a golden render) and their execution.
+
+A :class:`RenderJob` names a scene *file* and everything that decides the pixels
+(resolution, spp, seed, sample stream, camera, crop window), so it can travel to
+another process or machine (:mod:`arches_render.render.distributed`) and give the
+same bits there as here: serial runs and Dask workers call the same
+:func:`run_job`. A process keeps the Mitsuba scenes it built in a small cache
+(keyed by file, modification time and the settings that shape the kernels), so a
+worker that renders many frames builds and compiles once; the camera of a frame
+is applied as a parameter edit (``sensor.to_world``, ``sensor.x_fov``), which
+re-uses the compiled kernels.
+"""
+
+from __future__ import annotations
+
+import os
+from collections import OrderedDict
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["RenderJob", "run_job", "clear_cache"]
+
+_CACHE: "OrderedDict[tuple, tuple]" = OrderedDict()
+_CACHE_SIZE = 4
+
+
+@dataclass(frozen=True)
+class RenderJob:
+    """Everything that decides one rendered image.
+
+    Attributes
+    ----------
+    scene : str
+        Scene file (absolute path, readable where the job runs).
+    width, height : int
+        Full image size in pixels.
+    spp, seed, passes : int
+        Samples per pixel, base seed, sample passes (0: automatic).
+    stream : int
+        Sample stream (frame or tile index): mixed into the pass seeds
+        (:func:`arches_render.render.renderer.pass_seed`).
+    geometry : str
+        ``'field'`` or ``'mesh'``.
+    aovs : bool
+        Also render the AOV layers.
+    camera : tuple or None
+        ``(origin, target, up, fov)`` replacing the scene's camera.
+    crop : tuple or None
+        ``(x0, y0, w, h)``: render this window only.
+    voxel : float
+        Mesh-mode voxel (0: the scene's).
+    threads : int
+        Dr.Jit worker threads (0: leave as is).
+    """
+
+    scene: str
+    width: int
+    height: int
+    spp: int
+    seed: int = 0
+    passes: int = 0
+    stream: int = 0
+    geometry: str = "field"
+    aovs: bool = True
+    camera: tuple | None = None
+    crop: tuple | None = None
+    voxel: float = 0.0
+    threads: int = 0
+
+    def with_(self, **changes) -> "RenderJob":
+        """A copy with some fields changed."""
+        return replace(self, **changes)
+
+
+def clear_cache() -> None:
+    """Forget the scenes this process built."""
+    _CACHE.clear()
+
+
+def _scene_for(job: RenderJob):
+    from ..scene import load_scene
+    from .renderer import build_scene
+    key = _key(job)
+    path = Path(job.scene).resolve()
+    if key in _CACHE:
+        _CACHE.move_to_end(key)
+        return _CACHE[key]
+    desc = load_scene(path)
+    scene = build_scene(desc, job.geometry, job.width, job.height, job.voxel or None, aovs=job.aovs,
+                        crop=job.crop)
+    _CACHE[key] = (desc, scene)
+    while len(_CACHE) > _CACHE_SIZE:
+        _CACHE.popitem(last=False)
+    return desc, scene
+
+
+def prime_cache(job: RenderJob, desc, scene) -> None:
+    """Hand this process's cache a scene already built for ``job`` (e.g. with a progress bar)."""
+    _CACHE[_key(job)] = (desc, scene)
+
+
+def _key(job: RenderJob) -> tuple:
+    path = Path(job.scene).resolve()
+    return (str(path), os.stat(path).st_mtime_ns, job.width, job.height, job.geometry, job.aovs,
+            job.crop, job.voxel)
+
+
+def set_camera(scene, origin, target, up, fov) -> None:
+    """Move a built scene's camera (a parameter edit: no kernel is recompiled)."""
+    import mitsuba as mi
+    params = mi.traverse(scene)
+    params["sensor.to_world"] = mi.AffineTransform4f(
+        mi.ScalarTransform4f().look_at(origin=[float(v) for v in origin],
+                                       target=[float(v) for v in target], up=[float(v) for v in up]))
+    params["sensor.x_fov"] = float(fov)
+    params.update()
+
+
+def run_job(job: RenderJob, progress=None):
+    """Render a job in this process.
+
+    Parameters
+    ----------
+    job : RenderJob
+    progress : callable, optional
+        ``progress(samples_done, spp)`` after each pass.
+
+    Returns
+    -------
+    (numpy.ndarray, dict)
+        Beauty ``(h, w, 3)`` float32 and the AOV layers ``{name: (array, letters)}``
+        (see :func:`arches_render.render.renderer.render_layers`).
+    """
+    from ..backend import set_variant
+    set_variant()
+    if job.threads:
+        import drjit as dr
+        dr.set_thread_count(int(job.threads))
+    from .renderer import render_layers
+    desc, scene = _scene_for(job)
+    cam = job.camera or (desc.camera.origin, desc.camera.target, desc.camera.up, desc.camera.fov)
+    set_camera(scene, *cam)
+    rgb, layers = render_layers(scene, job.spp, job.seed, job.passes, progress, stream=job.stream)
+    return np.ascontiguousarray(rgb), layers
