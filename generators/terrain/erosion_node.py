@@ -1,0 +1,116 @@
+"""The erosion node ``f~ = f - f_D (1 - rho)`` (Paris et al. 2019, Sec. 6).
+
+A sub-tree ``f`` loses material where the erosion field ``f_D`` (the compactly
+supported field of a :class:`~.skeletal_set.SkeletalSet` of non-negative energies,
+or any node whose positive part is the erosion intensity) is strong and the
+bedrock resistance ``rho`` (a :mod:`.geology` tree, clamped to ``[0, 1]``) is weak.
+One node carries strata detail finer than its primitives: hard layers
+(``rho ~ 1``) resist while soft ones (``rho ~ 0``) are cut back by ``f_D``.
+
+We use ``D = max(f_D, 0)`` so the node only removes matter even if the control
+field dips below zero. Then:
+
+* ``f~ <= f``: the eroded solid lies inside the child's, so the child's box and
+  distance bounds stay valid (the bound at level ``c`` is the child's, or Hart's
+  bound of ``f~`` when larger), and a unit-rate falloff of the child is kept.
+* Lipschitz: ``|grad(D (1 - rho))| <= L_D + sup D L_rho`` (``0 <= 1 - rho <= 1``), so
+  ``L = L_f + L_D + M_D L_rho`` with ``M_D`` the erosion field's ``value_max``. The
+  same holds in a ball with the erosion field's local bounds
+  (:meth:`~.skeletal_set.SkeletalSet.local_lipschitz`), which ``eval_bounds`` uses.
+
+References
+----------
+Paris, A. et al. (2019). Terrain amplification with implicit 3D features. ACM TOG
+38(5), Sec. 6 (Fig. 10).
+"""
+
+from __future__ import annotations
+
+from arches_render.field.node import Node, hart_bounds
+
+from .geology import ResistanceNode
+from .operators import local_hart, local_lipschitz
+
+
+class Erosion(Node):
+    """``f - max(f_D, 0) (1 - clamp(rho, 0, 1))`` (see module docstring).
+
+    Parameters
+    ----------
+    child : Node
+        The eroded sub-tree ``f`` (a terrain).
+    erosion_field : Node
+        ``f_D``, with a known upper bound ``value_max`` (a ``SkeletalSet``).
+    resistance : ResistanceNode
+        The geology tree ``rho``.
+    """
+
+    kind = "erosion"
+
+    def __init__(self, child: Node, erosion_field: Node, resistance: ResistanceNode):
+        if not isinstance(resistance, ResistanceNode):
+            raise ValueError(f"erosion resistance must be a geology node (got {type(resistance).__name__})")
+        if isinstance(child, ResistanceNode) or isinstance(erosion_field, ResistanceNode):
+            raise ValueError("erosion child and erosion_field must be field nodes, not resistance nodes")
+        if getattr(erosion_field, "value_max", None) is None:
+            raise ValueError(f"erosion_field ({type(erosion_field).__name__}) has no known upper bound "
+                             "(value_max): use a skeletal_set")
+        self.children = (child, erosion_field, resistance)
+
+    def _erode(self, p, f):
+        # The geology tree is evaluated only where the erosion field is positive
+        # (a symbolic branch: packets with no such lane skip it).
+        import drjit as dr
+        fd = self.children[1].eval(p)
+
+        def eroded(p, f, fd):
+            return f - fd * (1.0 - dr.clip(self.children[2].eval(p), 0.0, 1.0))
+
+        def intact(p, f, fd):
+            return f
+
+        return dr.if_stmt((p, f, fd), fd > 0.0, eroded, intact, label="erosion")
+
+    def eval(self, p):
+        return self._erode(p, self.children[0].eval(p))
+
+    def local_lipschitz(self, p):
+        """``(L, M, r)``: slope bound ``L`` in the ball of radius ``r`` around ``p`` (the
+        erosion field's local bounds, see the module docstring); ``M`` is the child's
+        ``value_max`` (erosion only removes), or None. ``None`` when the erosion field
+        has no local bounds."""
+        import drjit as dr
+        own = getattr(self.children[1], "local_lipschitz", None)
+        if own is None:
+            return None
+        Lf, rf = local_lipschitz(self.children[0], p)
+        LD, MD, rD = own(p)
+        L = Lf + LD + MD * self.children[2].lipschitz
+        return L, self.value_max, (rD if rf is None else dr.minimum(rf, rD))
+
+    def eval_bounds(self, p, levels, direction=None):
+        import drjit as dr
+        f, ds = self.children[0].eval_bounds(p, levels, direction)
+        v = self._erode(p, f)
+        local = self.local_lipschitz(p)
+        if local is None:
+            hart = hart_bounds(v, levels, self.lipschitz)
+        else:
+            hart = local_hart(v, levels, local[0], local[2], self.lipschitz)
+        return v, tuple(dr.maximum(d, h) for d, h in zip(ds, hart))
+
+    def bounds(self):
+        return self.children[0].bounds()
+
+    @property
+    def unit_falloff(self):
+        return self.children[0].unit_falloff
+
+    @property
+    def lipschitz(self):
+        f, d, rho = self.children
+        return f.lipschitz + d.lipschitz + max(float(d.value_max), 0.0) * rho.lipschitz
+
+    @property
+    def value_max(self):
+        return getattr(self.children[0], "value_max", None)

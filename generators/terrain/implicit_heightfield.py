@@ -1,0 +1,268 @@
+"""Heightfield implicitization: the compact terrain primitive of Paris et al. (2019, Sec. 5.1).
+
+Elevation. ``h(x, y)`` is the bilinear interpolant of a DEM grid (the lookup of
+:class:`arches_render.field.Heightfield`, which this class extends), plus optional
+*elevation primitives* with compact falloff and an optional fBm *amplification*:
+
+    h(x, y) = H(x, y) + sum_i h_i g(|(x, y) - c_i| / R_i) + a fbm((x, y, 0) / lambda).
+
+The elevation primitives are a :class:`~.skeletal_set.SkeletalSet` of points in the
+plane ``z = 0`` (so thousands of them stay one grid lookup), evaluated at ``(x, y, 0)``.
+
+Field. With ``v(p) = h(p_xy) - p_z`` the signed vertical distance (positive below
+the ground) and the odd cubic sigmoid ``s`` of :mod:`.falloff` (the paper's
+``sigma = T + s``, shifted by ``-T`` so that the surface is ``f = 0`` as everywhere in
+arches-render):
+
+    f_T(p) = s(v(p))                          in [-T, T],
+    f_P(p) = T (2 g(d(p, P) / R) - 1)         in [-T, T],
+    f(p)   = min(f_T(p), f_P(p)).
+
+``P = (Omega shrunk by R) x [base, max h]`` is the prism and ``d(p, P)`` the Euclidean
+distance to it (0 inside). The paper says ``f_P`` "equals T inside the prism"; in
+its units that would make ``f <= T`` everywhere and leave no interior, so we read
+it as ``2T g`` (range ``[0, 2T]``, like ``f_T``): the surface of the prism then lies
+``r0 = R sqrt(1 - 2^(-1/3)) ~= 0.454 R`` outside ``P``, within ``Omega``, and the
+input heightfield is embedded exactly over ``Omega`` shrunk by ``R`` (the paper's
+guarantee). Deep inside the terrain ``f = T``: a carving primitive must reach an
+energy above ``T`` (see :func:`.falloff.energy_for_radius`).
+
+Near the surface ``f ~ v`` (``s'(0) = 1``), so values are metres of vertical distance
+there and other metre-valued nodes combine with it. The default ``T = R / 2`` makes
+``s`` the quadratic ``x - x^2 / (2R)`` with slope at most 1.
+
+How this relates to :class:`arches_render.field.Heightfield`: that node is the same
+prism solid with distance-like values ``min(h - z, box)`` that grow without bound
+inside; this one has the paper's *compact* range, which is what carving and
+blending with energies need. Both share the DEM lookup, the slope bound and the
+maximum-mipmap tables.
+
+Lipschitz bound: ``L_h = sqrt(1 + S^2)`` with ``S`` the slope bound of ``h`` (grid slope
+bound of the parent + the elevation primitives' bound + the fBm's), so
+``L = max(S_SIGMA L_h, 2 T G_SLOPE / R)``.
+
+Distance bounds (``eval_bounds``, level ``c``): ``{f >= -c}`` is inside both
+``{f_T >= -c}`` and ``{f_P >= -c}``, so the bound is the larger of the two.
+For ``c < T``, ``s(v) >= -c`` implies ``v >= -c / k`` (``k = min(1, T/R)``, see
+:mod:`.falloff`), i.e. ``z <= h + c / k``: the parent's maximum-mipmap clearance
+bounds apply to the shifted level. ``f_P >= -c`` is the box ``P`` grown by
+``r_c = R sqrt(1 - ((1 - c/T)/2)^(1/3))``, whose distance is ``d(p, P) - r_c``.
+
+References
+----------
+Paris, A., Galin, E., Peytavie, A., Guérin, E., Gain, J. (2019). Terrain
+amplification with implicit 3D features. ACM TOG 38(5), Sec. 3.3, 5.1.
+Génevaux, J.-D. et al. (2015). Terrain modelling from feature primitives. CGF 34(6)
+(elevation primitives with compact support).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from arches_render.field import Heightfield
+from arches_render.field.node import box_distance, opaque_float
+from arches_render.field.noise import fbm, fbm_lipschitz, fbm_range
+
+from .falloff import G_SLOPE, sigmoid_coefficients, sigmoid_dr, sigmoid_slope
+from .skeletal_set import SkeletalSet
+
+R0_FACTOR = math.sqrt(1.0 - 2.0 ** (-1.0 / 3.0))
+
+
+class ImplicitHeightfield(Heightfield):
+    """Compact implicit terrain ``min(f_T, f_P)`` over a DEM (see module docstring).
+
+    Parameters
+    ----------
+    heights : array_like
+        ``(ny, nx)`` elevations (metres), finite, at least 2x2.
+    extent : sequence of 4 floats
+        ``(x0, y0, x1, y1)``: the domain ``Omega``.
+    R : float, optional
+        Falloff radius (metres) of the sigmoid and of the prism; default 4 grid
+        cells (at most a quarter of the shorter side); ``2R`` must be smaller than
+        both sides of ``Omega``.
+    T : float, optional
+        Threshold ``T`` (field value deep inside), in ``[R/3, 2R]``; default ``R/2``.
+    base : float, optional
+        Bottom of the prism ``P``; default ``min h - max(R, 5 % of the relief)``.
+    bumps : dict, optional
+        Elevation primitives: ``center (N, 2)``, ``radius (N,)``, ``height (N,)``.
+    amplification : dict, optional
+        fBm added to the elevation: ``amplitude``, ``wavelength``, ``octaves`` (4),
+        ``lacunarity`` (2), ``gain`` (0.5), ``seed`` (0).
+    """
+
+    kind = "implicit_heightfield"
+
+    def __init__(self, heights, extent, R=None, T=None, base=None, bumps=None, amplification=None):
+        H = np.asarray(heights, dtype=np.float64)
+        if H.ndim != 2 or min(H.shape) < 2:
+            raise ValueError("heights must be a 2-D array of at least 2x2 samples")
+        if not np.all(np.isfinite(H)):
+            raise ValueError("heights contain NaN or infinite values")
+        x0, y0, x1, y1 = (float(v) for v in extent)
+        if not (x1 > x0 and y1 > y0):
+            raise ValueError("extent must satisfy x1 > x0 and y1 > y0")
+        cell = min((x1 - x0) / (H.shape[1] - 1), (y1 - y0) / (H.shape[0] - 1))
+        R = float(R) if R is not None else min(4.0 * cell, 0.25 * min(x1 - x0, y1 - y0))
+        if not R > 0:
+            raise ValueError("R must be > 0")
+        if not 2.0 * R < min(x1 - x0, y1 - y0):
+            raise ValueError(f"R = {R:g} m is too large: 2R must be smaller than the extent's sides")
+        T = float(T) if T is not None else 0.5 * R
+        self.sig_a, self.sig_b = sigmoid_coefficients(R, T)  # validates T in [R/3, 2R]
+        self.R_np, self.T_np = R, T
+
+        # Optional extras of the elevation function.
+        self.bumps = None
+        extra_hi, extra_lo, extra_slope = 0.0, 0.0, 0.0
+        if bumps is not None:
+            try:
+                c = np.asarray(bumps["center"], dtype=np.float64).reshape(-1, 2)
+                pts = np.column_stack([c, np.zeros(len(c))])
+                self.bumps = SkeletalSet(pts, None, bumps["radius"], bumps["height"])
+            except (ValueError, KeyError, TypeError) as exc:
+                raise ValueError(f"bumps: {exc} (need center (N, 2), radius (N,), height (N,))") from None
+            extra_hi, extra_lo = self.bumps.value_max, self.bumps.value_min
+            extra_slope += self.bumps.lipschitz
+        self.amp = None
+        if amplification is not None:
+            p = dict(octaves=4, lacunarity=2.0, gain=0.5, seed=0)
+            p.update(amplification)
+            if not p["wavelength"] > 0 or not 1 <= int(p["octaves"]) <= 12:
+                raise ValueError("amplification needs wavelength > 0 and octaves in [1, 12]")
+            self.amp = p
+            rng = abs(p["amplitude"]) * fbm_range(int(p["octaves"]), p["gain"])
+            extra_hi, extra_lo = extra_hi + rng, extra_lo - rng
+            extra_slope += abs(p["amplitude"]) * fbm_lipschitz(int(p["octaves"]), p["lacunarity"],
+                                                               p["gain"]) / p["wavelength"]
+            self._amp_a = opaque_float(p["amplitude"])
+            self._amp_inv_wl = opaque_float(1.0 / p["wavelength"])
+            self._amp_lac, self._amp_gain = opaque_float(p["lacunarity"]), opaque_float(p["gain"])
+            import drjit as dr
+            import mitsuba as mi
+            self._amp_seed = dr.opaque(mi.UInt32, int(p["seed"]) & 0xFFFFFFFF)
+        self.extra_hi, self.extra_lo = extra_hi, extra_lo
+
+        hmin, hmax = float(H.min()) + extra_lo, float(H.max()) + extra_hi
+        if base is None:
+            base = hmin - max(R, 0.05 * (hmax - hmin))
+        base = float(base)
+        if not base < hmax:
+            raise ValueError(f"base ({base:g}) must lie below the highest elevation ({hmax:g})")
+        super().__init__(H, (x0, y0, x1, y1), base=base)
+        self.grid_slope = self.slope_bound
+        self.slope_bound = self.grid_slope + extra_slope
+        self.top_np = hmax
+        self.prism_lo = np.array([x0 + R, y0 + R, base])
+        self.prism_hi = np.array([x1 - R, y1 - R, hmax])
+        self._plo = [opaque_float(v) for v in self.prism_lo]
+        self._phi = [opaque_float(v) for v in self.prism_hi]
+        self._R, self._T = opaque_float(R), opaque_float(T)
+        self._a, self._b = opaque_float(self.sig_a), opaque_float(self.sig_b)
+        self._inv_k = opaque_float(1.0 / min(1.0, T / R))
+        self._extra = opaque_float(extra_hi)
+        self._inv_Lh = opaque_float(1.0 / math.sqrt(1.0 + self.slope_bound ** 2))
+
+    # -- elevation ------------------------------------------------------------------
+    def elevation(self, x, y):
+        """``h(x, y)`` (``mi.Float`` each): grid + elevation primitives + fBm."""
+        import mitsuba as mi
+        h = self.height(x, y)
+        if self.bumps is not None:
+            h = h + self.bumps.field(mi.Point3f(x, y, 0.0))
+        if self.amp is not None:
+            q = mi.Point3f(x, y, 0.0) * self._amp_inv_wl
+            h = h + self._amp_a * fbm(q, int(self.amp["octaves"]), self._amp_lac, self._amp_gain,
+                                      self._amp_seed)
+        return h
+
+    def elevation_np(self, x, y) -> np.ndarray:
+        """``h`` on numpy coordinates (same code as the renderer's, through Dr.Jit)."""
+        from arches_render.backend import variant
+        variant()
+        import drjit as dr
+        import mitsuba as mi
+        x = np.asarray(x, dtype=np.float32)
+        y = np.broadcast_to(np.asarray(y, dtype=np.float32), x.shape)
+        h = self.elevation(mi.Float(x.ravel()), mi.Float(np.ascontiguousarray(y).ravel()))
+        dr.eval(h)
+        return h.numpy().reshape(x.shape)
+
+    # -- field ----------------------------------------------------------------------
+    def _prism(self, p):
+        import drjit as dr
+        from .falloff import g_dr
+        d = box_distance(p, self._plo, self._phi)
+        return self._T * (2.0 * g_dr(dr.square(d / self._R)) - 1.0), d
+
+    def eval(self, p):
+        import drjit as dr
+        fT = sigmoid_dr(self.elevation(p.x, p.y) - p.z, self._R, self._a, self._b)
+        return dr.minimum(fT, self._prism(p)[0])
+
+    def eval_bounds(self, p, levels, direction=None):
+        import drjit as dr
+        import mitsuba as mi
+        v = self.elevation(p.x, p.y) - p.z
+        fP, dP = self._prism(p)
+        f = dr.minimum(sigmoid_dr(v, self._R, self._a, self._b), fP)
+        u = dr.clip((p.x - self._x0) * self._inv_dx, 0.0, self.nx - 1.0)
+        w = dr.clip((p.y - self._y0) * self._inv_dy, 0.0, self.ny - 1.0)
+        k = dr.minimum(mi.UInt32(w), self.ny - 2) * self.nx + dr.minimum(mi.UInt32(u), self.nx - 2)
+        above = [p.z - dr.gather(mi.Float, maxima, k) - self._extra for maxima in self._maxima]
+        if direction is not None:
+            inv_run = dr.rcp(dr.maximum(dr.sqrt(dr.square(direction.x) + dr.square(direction.y)), 1e-7))
+            inv_drop = dr.rcp(dr.maximum(dr.abs(direction.z), 1e-7))
+        ds = []
+        for c in levels:
+            # f_T >= -c  =>  v >= -c / k (c < T); nothing to bound when c >= T.
+            shift = c * self._inv_k
+            dT = dr.maximum(-v - shift, 0.0) * self._inv_Lh
+            for clearance, radius in zip(above, self._radii):
+                if direction is None:
+                    reach = dr.minimum(radius, clearance - shift)
+                else:
+                    reach = dr.minimum(radius * inv_run, (clearance - shift) * inv_drop)
+                dT = dr.maximum(dT, reach)
+            wc = dr.clip((1.0 - c / self._T) * 0.5, 0.0, 1.0)
+            rc = self._R * dr.sqrt(dr.maximum(1.0 - dr.cbrt(wc), 0.0))
+            d = dr.maximum(dT, dr.maximum(dP - rc, 0.0))
+            ds.append(dr.select(c >= self._T, 0.0, d))
+        return f, tuple(ds)
+
+    def bounds(self):
+        r0 = R0_FACTOR * self.R_np
+        return self.prism_lo - np.array([r0, r0, r0]), self.prism_hi + np.array([r0, r0, 0.0])
+
+    @property
+    def lipschitz(self):
+        Lh = math.sqrt(1.0 + self.slope_bound ** 2)
+        return max(sigmoid_slope(self.R_np, self.T_np) * Lh, 2.0 * self.T_np * G_SLOPE / self.R_np)
+
+    # Saturates at -T in the air: no unit-rate falloff away from the box.
+    unit_falloff = False
+
+    @property
+    def value_max(self):
+        return self.T_np
+
+    @property
+    def value_min(self):
+        return -self.T_np
+
+    @property
+    def cost(self):
+        c = 4.0
+        if self.bumps is not None:
+            c += self.bumps.cost
+        if self.amp is not None:
+            c += 6.0 * int(self.amp["octaves"])
+        return c
+
+    def nbytes(self):
+        return super().nbytes() + (self.bumps.nbytes() if self.bumps is not None else 0)
