@@ -1,0 +1,253 @@
+"""The aperiodic rock tile set: rocks of the 256 corner cubes, region by region.
+
+Pipeline per region (Peytavie et al. 2009, figure 7):
+
+1. seeds of the region's cells and their 1-neighbourhood
+   (:mod:`.corner_cubes`, :mod:`.seed_points`);
+2. discrete anisotropic Voronoi labels on the region's voxels plus half a
+   cell (:mod:`.anisotropic_voronoi`);
+3. contact points by bisection (:mod:`.contact_points`), damping field and
+   spheroidal erosion (:mod:`.damped_erosion`);
+4. one closed mesh per rock whose seed lies in the region (:mod:`.rock_meshes`).
+
+A rock belongs to the region of its seed's cell and is stored once, however
+many corner cubes contain that region; a corner cube is the union of its 8
+vertex, 12 edge, 6 face and 1 centre regions (:func:`cube_rocks`).
+
+Regions are independent, so they are built in parallel worker processes (forkserver).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+
+import numpy as np
+from scipy import ndimage
+
+from . import corner_cubes as cc
+from .anisotropic_voronoi import CellIndex, voronoi_labels
+from .contact_points import adjacent_label_pairs, bisect_contacts
+from .damped_erosion import LINEAR, damping_field, erode
+from .rock_meshes import field_padding, mesh_rock, rock_field
+from .rock_store import RockStore
+from .seed_points import cell_seeds
+from .tile_params import TileParams
+
+__all__ = ["region_seeds", "region_labels", "build_region", "build_aperiodic_tiles", "cube_rocks",
+           "cube_slots"]
+
+
+def region_seeds(mask: int, code: int, params: TileParams):
+    """Seeds of a region's known cells (region + 1-neighbourhood), base at the origin."""
+    n = params.n
+    known = cc.region_known_cells(mask, n)
+    m, base, rel = cc.cell_owners(known, n)
+    codes = cc.owner_colour_codes(m, base, cc.region_colour_lookup(mask, code))
+    keys = cc.cell_keys(m, codes, rel, params.seed)
+    seeds = cell_seeds(known, keys, params.seeds)
+    lo = known.min(axis=0)
+    return CellIndex(seeds, lo, known.max(axis=0) - lo + 1)
+
+
+def region_grid(mask: int, n: int, V: int):
+    """Voxel box of a region: its cells plus half a cell and one voxel (``g0``, ``shape``)."""
+    cells = cc.region_cells(mask, n)
+    g0 = cells.min(axis=0) * V - V // 2 - 1
+    g1 = (cells.max(axis=0) + 1) * V + V // 2 + 1
+    return g0, g1 - g0
+
+
+def region_labels(mask: int, code: int, params: TileParams):
+    """Voronoi labels of a region's voxel box and the mask of its own seeds.
+
+    Returns
+    -------
+    index : CellIndex
+    g0 : (3,) int64
+    labels : int32 array
+    own : (K,) bool
+        Seeds whose cell lies in the region.
+    """
+    index = region_seeds(mask, code, params)
+    g0, shape = region_grid(mask, params.n, params.voxels_per_cell)
+    labels = voronoi_labels(index, g0, shape, params.voxels_per_cell)
+    cells = cc.region_cells(mask, params.n)
+    lo, hi = cells.min(axis=0), cells.max(axis=0)
+    sc = index.seeds.cell
+    own = np.all((sc >= lo) & (sc <= hi), axis=1)
+    return index, g0, labels, own
+
+
+def build_region(mask: int, code: int, params: TileParams, slot: int) -> list[dict]:
+    """Rocks of one region (see module docstring).
+
+    Returns
+    -------
+    list of dict
+        Per rock: vertices, faces, normals (cells, region-local), seed,
+        radius, uid, slot, anchors.
+    """
+    V, er = params.voxels_per_cell, params.erosion
+    index, g0, labels, own = region_labels(mask, code, params)
+    seeds = index.seeds
+    pairs = adjacent_label_pairs(labels)
+    pairs = pairs[own[pairs[:, 0]] | own[pairs[:, 1]]]
+    contacts = bisect_contacts(seeds, pairs)
+    omega = damping_field(labels, g0, V, len(seeds), pairs, contacts, er.contact_radius,
+                          er.blend_radius, LINEAR, own=own)
+    rho = erode(labels, own, omega, er.steps, er.rate)
+    return _rocks_from_grid(labels, rho, g0, V, seeds.position, seeds.uid, np.nonzero(own)[0],
+                            params, slot)
+
+
+def _rocks_from_grid(labels, rho, g0, V, seed_pos, uid, own_ids, params, slot):
+    """Mesh every rock ``k in own_ids`` of a labelled, eroded grid."""
+    pad = field_padding(params.erosion.smoothing, params.mesh_step)
+    boxes = ndimage.find_objects(labels + 1)
+    rocks = []
+    for k in own_ids:
+        if k >= len(boxes) or boxes[k] is None:
+            continue
+        lo = np.array([s.start for s in boxes[k]])
+        hi = np.array([s.stop for s in boxes[k]])
+        field = rock_field(labels, rho, k, lo, hi, params.erosion.smoothing, pad)
+        origin = np.asarray(g0) + lo - pad
+        rock = _rock_record(field, origin, V, seed_pos[k], uid[k], params, slot)
+        if rock is not None:
+            rocks.append(rock)
+    return rocks
+
+
+def _rock_record(field, origin, V, seed_pos, uid, params, slot):
+    mesh = mesh_rock(field, origin, V, params.mesh_step)
+    if mesh is None:
+        return None
+    verts, faces, normals = mesh
+    # Anchors (section 6): centres of voxels that hold rock, evenly subsampled.
+    inside = np.argwhere(field > 0.5)
+    pick = inside[np.linspace(0, len(inside) - 1, params.anchors).round().astype(np.int64)]
+    anchors = (pick + np.asarray(origin) + 0.5) / V
+    p = np.asarray(seed_pos, dtype=np.float64)
+    return dict(vertices=verts, faces=faces, normals=normals, seed=p,
+                radius=float(np.sqrt(((verts - p) ** 2).sum(axis=1).max())),
+                uid=np.uint64(uid), slot=slot, anchors=anchors.astype(np.float32))
+
+
+def _build_slots(args):
+    import resource
+    slots, params = args
+    r0 = resource.getrusage(resource.RUSAGE_SELF)
+    all_regions = cc.regions()
+    out = []
+    for s in slots:
+        mask, code = all_regions[s]
+        out.extend(build_region(mask, code, params, s))
+    r1 = resource.getrusage(resource.RUSAGE_SELF)
+    return out, (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
+
+
+def build_aperiodic_tiles(params: TileParams, progress=None, workers: int | None = None) -> RockStore:
+    """The whole aperiodic tile set: rocks of all 318 regions (2 + 12 + 48 + 256).
+
+    Parameters
+    ----------
+    params : TileParams
+        With ``tiling = 'aperiodic'``.
+    progress : callable, optional
+        ``progress(done_regions, total_regions)``.
+    workers : int, optional
+        Worker processes (default: the CPU count, at most 8; 1 runs inline). They
+        are started by multiprocessing's forkserver, so a script calling this with
+        several workers needs the usual ``if __name__ == "__main__":`` guard.
+
+    Returns
+    -------
+    RockStore
+        Slots are region indices of :func:`.corner_cubes.regions`.
+
+    References
+    ----------
+    Peytavie et al. 2009, sections 3-5 and table 1.
+    """
+    if params.tiling != "aperiodic":
+        raise ValueError("build_aperiodic_tiles needs tiling = 'aperiodic'")
+    t0 = time.perf_counter()
+    all_regions = cc.regions()
+    # Centre regions dominate the cost; interleave so every batch is alike.
+    order = list(range(len(all_regions)))
+    workers = workers or min(os.cpu_count() or 1, 8)
+    batches = [order[i::max(1, 4 * workers)] for i in range(max(1, 4 * workers))]
+    rocks = []
+    done, cpu = 0, 0.0
+    if workers <= 1:
+        for b in batches:
+            res, c = _build_slots((b, params))
+            rocks.extend(res)
+            cpu += c
+            done += len(b)
+            if progress:
+                progress(done, len(order))
+    else:
+        import multiprocessing as mp
+        # Not "fork": a parent that already ran numba's (or Dr.Jit's) thread pools can hand a
+        # child a lock held by a thread that does not exist there, and the child hangs.
+        ctx = mp.get_context("forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn")
+        with ctx.Pool(workers, initializer=_single_thread) as pool:
+            for b, (res, c) in zip(batches, pool.imap(_build_slots, [(b, params) for b in batches])):
+                rocks.extend(res)
+                cpu += c
+                done += len(b)
+                if progress:
+                    progress(done, len(order))
+    meta = dict(tiling="aperiodic", params=params.to_dict(), n=params.n, cells_per_period=params.n,
+                voxels_per_cell=params.voxels_per_cell, build_seconds=time.perf_counter() - t0,
+                worker_cpu_seconds=cpu, regions=len(all_regions))
+    return RockStore.from_rocks(rocks, len(all_regions), meta)
+
+
+def _single_thread():
+    import numba
+    numba.set_num_threads(1)
+
+
+def cube_slots(config: int) -> list[tuple[int, np.ndarray]]:
+    """The 27 regions of corner cube ``config``: ``(region index, base offset in lattice units)``.
+
+    Vertex regions sit at the 8 corners, edge regions at the 12 edges, face
+    regions at the 6 faces, and the centre region inside; each is the region
+    whose corners are the cube's corners it touches.
+    """
+    colours = cc.cube_colours(config).reshape(2, 2, 2, order="F")   # [x, y, z]
+    out = []
+    for mask in cc.REGION_MASKS:
+        near = [(mask >> a) & 1 for a in range(3)]
+        for corner in np.ndindex(*(2 if near[a] else 1 for a in range(3))):
+            base = np.array(corner, dtype=np.int64)
+            code = 0
+            for j, off in enumerate(cc.region_vertex_offsets(mask)):
+                v = base + off
+                code |= int(colours[v[0], v[1], v[2]]) << j
+            out.append((int(cc.region_index(mask, code)), base))
+    return out
+
+
+def cube_rocks(store: RockStore, config: int):
+    """Rocks of corner cube ``config`` whose seed lies inside the cube ``[0, n)^3`` (cells).
+
+    Returns
+    -------
+    ids : (K,) int64
+        Rock indices into ``store``.
+    offsets : (K, 3) float64
+        Cell offset to add to each rock's slot-local coordinates.
+    """
+    n = store.meta["n"]
+    ids, offs = [], []
+    for slot, base in cube_slots(config):
+        r = store.slot_rocks(slot)
+        seeds = store.seed[r] + base * n
+        inside = np.all((seeds >= 0) & (seeds < n), axis=1)
+        ids.append(r[inside])
+        offs.append(np.repeat(base[None] * n, inside.sum(), axis=0).astype(np.float64))
+    return np.concatenate(ids), np.concatenate(offs)

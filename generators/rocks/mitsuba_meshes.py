@@ -1,0 +1,50 @@
+"""Rock buffers as ordinary Mitsuba meshes (no ``shapegroup``/``instance``).
+
+Measured on Mitsuba 3.9.1 with 5,000 rocks (see ``design.md``): ``shapegroup``
+plus ``instance`` took 434-546 s and 8.9 GB to set up, flat meshes with baked
+transforms 0.97 s and 0.9 GB. So every buffer of :func:`.instancing.instance_buffers`
+(rocks merged per tile, world-space vertices) becomes one ``mi.Mesh``, with
+the rocks' object-space positions in the ``vertex_objp`` attribute that the
+``triplanar`` BSDF reads when its ``space`` is ``'object'``: a rock's texture
+stays on the rock.
+"""
+
+from __future__ import annotations
+
+__all__ = ["rock_meshes_mitsuba"]
+
+
+def rock_meshes_mitsuba(buffers: list, bsdf, name: str = "rocks") -> list:
+    """One ``mi.Mesh`` per buffer.
+
+    Parameters
+    ----------
+    buffers : list of dict
+        From :func:`.instancing.instance_buffers`.
+    bsdf : mi.BSDF
+        Shared by all meshes.
+    name : str
+        Prefix of the mesh ids.
+
+    Returns
+    -------
+    list of mi.Mesh
+    """
+    import drjit as dr
+    import mitsuba as mi
+
+    from arches_render.materials.triplanar import OBJP_ATTRIBUTE
+    out = []
+    for i, b in enumerate(buffers):
+        props = mi.Properties()
+        props["bsdf"] = bsdf
+        mesh = mi.Mesh(f"{name}_{i}", len(b["positions"]), len(b["faces"]), props, has_vertex_normals=True)
+        params = mi.traverse(mesh)
+        params["vertex_positions"] = mi.Float(b["positions"].ravel())
+        params["faces"] = mi.UInt32(b["faces"].ravel())
+        params["vertex_normals"] = mi.Float(b["normals"].ravel())
+        params.update()
+        mesh.add_attribute(OBJP_ATTRIBUTE, 3, mi.Float(b["objp"].ravel()))
+        out.append(mesh)
+    dr.eval()
+    return out
