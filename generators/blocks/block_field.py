@@ -1,0 +1,476 @@
+"""The replicated block field ``t(p)``: plane arrays of a tile behind a lookup grid.
+
+Block (Paris et al. 2020, section 4.2). Block ``i`` is the smooth intersection of
+its half-spaces; with the inside-positive convention of the field language a
+half-space is ``h_k(p) = w_k - u_k . p`` (:mod:`.block_hulls`), and
+
+    c_i(p) = smin_R(h_1, ..., h_K),    smin_R(a, b) = -smax_R(-a, -b)
+
+folded over the planes (largest face first), with ``smax_R`` the smooth maximum of
+:func:`arches_render.field.operators.smooth_max` (radius ``R = smoothness``,
+default the paper's 25 cm). The paper's operator is Barthe's cubic
+``max(a, b) - R k^3 / 6``; the language's quadratic one has the same support
+(``|a - b| < R``), is C1 as the gradient-based warp requires, and its partial
+derivatives are non-negative with sum one, so a fold of 1-Lipschitz planes stays
+1-Lipschitz.
+
+Surface details (section 4.2, "gradient-based warping"): ``b = c o w^-1`` with
+``w^-1(p) = p + g(p) sum_i alpha_i(g) d(gamma_i(p))``, ``g`` the normalized gradient,
+``gamma_i`` the projections on the planes ``xy, xz, yz`` and ``alpha_i = |g . e_i|``.
+It is applied here to the leaves of the block's construction tree (Figure 7), the
+half-spaces, *before* the smooth intersection: the gradient of ``h_k`` is the
+constant ``-u_k``, and for a plane ``h_k(p + g D) = h_k(p) + D`` exactly, so
+
+    h~_k(p) = h_k(p) + e D_k(p),    D_k(p) = sum_i alpha_ki d(gamma_i(p)),
+    alpha_ki = |u_k . e_i| / sum_j |u_k . e_j|      (normalized triplanar weights),
+
+with ``d`` a 2-octave fBm of wavelength ``lambda`` (``warp_wavelength``) and ``e``
+the amplitude (``warp``). This is the paper's operator on flat faces; at the
+rounded edges the smooth intersection blends the displaced faces instead of
+warping along a blended gradient. The reason is rigour: the Lipschitz bound of the
+paper's form needs a lower bound of ``|grad c|`` and an upper bound of its Hessian,
+neither available for a fold of many planes; here
+
+    L = 1 + e L_d / lambda,    L_d = fbm_lipschitz(octaves, 2, 1/2),
+
+because each ``D_k`` is a convex combination of three ``L_d / lambda``-Lipschitz
+functions and the fold keeps the largest bound. ``d`` is evaluated at the world
+position, so replicated copies of a block get different details.
+
+Replication (section 5): ``t(p) = max_i b_i(p mod s) e_i(a_i + s floor(p / s))``.
+With ``T = floor(p / s)`` and ``q = p - s T``, a tile-local grid of cells lists the
+*images* ``(i, o)`` (block ``i`` shifted by ``o s``, ``o`` in ``{-2..2}^3``) whose
+box, grown by ``m + e |d|_max``, meets the cell: the paper's "contribution in
+neighbouring cells to account for blocks straddling C" without a case analysis.
+The image ``(i, o)`` is the copy of block ``i`` in the virtual cell ``T + o``, so
+its presence is ``e(i, T + o)`` (precomputed by :mod:`.replication`, a table over
+the virtual cells of a region; without a table every block is present) and its
+value ``b_i(q - o s)``. Then
+
+    t(p) = max(-m, max_{(i, o) in cell(q), present} b_i(q - o s))
+
+equals ``max(-m, max over all present copies)`` everywhere: a copy missing from the
+cell has ``b <= min_k h~_k < -m`` there (it lies outside the offset polytope that
+was registered). Each copy is a continuous function of ``p`` whatever tile ``p``
+falls in, so ``t`` is continuous across tile faces and ``L``-Lipschitz: the
+mod-tiling adds nothing to the bound. ``e = 0`` absent copies simply leave the max
+(the product ``b_i e_i`` of the paper, read as "absent blocks do not contribute";
+with ``f > 0`` inside a literal product would make every absent block a surface).
+
+Evaluation. Without a presence table the tile-local lists above are used as they
+are (pure mod-tiling, every block everywhere). With one, presence depends on ``p``
+only through the virtual cell, so the present copies ``(i, T)`` are known at build
+time; they are listed, with the same grown boxes, in a world grid over the region
+(same ``t``, no presence test left in the kernel), whose empty cells answer
+``t = -m`` at once. Blocks are evaluated nearest first with an early exit of the
+plane fold once it falls below the running maximum (a fold only decreases).
+:meth:`eval_bounds` adds to Hart's bound an empty-space distance (distance
+transform of the world grid) and a per-copy bound (see the method), so rays stride
+further than ``m / L`` near blocks (as in :class:`~arches_render.field.CapsuleSet`).
+
+References
+----------
+Paris et al. (2020), sections 4.2 (Figures 7-10) and 5.
+Barthe, L., Gaildrat, V., Caubet, R. (1998). Combining implicit surfaces with soft
+blending in a CSG tree. CSG Conference Series, 17-31.
+Stolte, N. (2002). Infinite implicit replication. Shape Modeling International.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from arches_render.field.node import Node, box_distance, opaque_float
+from arches_render.field.noise import fbm_lipschitz, fbm_range
+from arches_render.field.operators import smooth_max
+
+from .block_hulls import offset_box
+
+__all__ = ["BlockField", "image_boxes"]
+
+_RANGE = 2  # image offsets o in {-2..2}^3
+_CODES = (2 * _RANGE + 1) ** 3
+
+
+def planar_noise(x, y, seed):
+    """:func:`~arches_render.field.noise.gradient_noise` on the plane ``z = 0``.
+
+    The same function as ``gradient_noise(Point3f(x, y, 0), seed)``: with ``z = 0``
+    the fade weight of the upper corners ``s(0) = 0`` vanishes and the lower corners
+    have ``u_z = 0``, so only the four corners ``c_z = 0`` are summed (half the
+    work). Its Lipschitz bound and range are those of the 3D noise.
+    """
+    import drjit as dr
+    import mitsuba as mi
+    from arches_render.field.noise import _corner_hash, _fade, _grad_dot
+    fx, fy = dr.floor(x), dr.floor(y)
+    ix, iy = mi.UInt32(mi.Int32(fx)), mi.UInt32(mi.Int32(fy))
+    ux, uy = x - fx, y - fy
+    wx, wy = _fade(ux), _fade(uy)
+    hx = (ix * 0x8DA6B343 ^ seed, (ix + 1) * 0x8DA6B343 ^ seed)
+    hy = (iy * 0xD8163841, (iy + 1) * 0xD8163841)
+    hz = mi.UInt32(0)
+    zero = mi.Float(0.0)
+    out = mi.Float(0.0)
+    for cx in (0, 1):
+        ax = wx if cx else 1.0 - wx
+        for cy in (0, 1):
+            ay = wy if cy else 1.0 - wy
+            out += ax * ay * _grad_dot(_corner_hash(hx[cx], hy[cy], hz), ux - cx, uy - cy, zero)
+    return out
+
+
+def planar_fbm(x, y, octaves, seed):
+    """fBm of :func:`planar_noise` (lacunarity 2, gain 1/2, per-octave offsets in the
+    plane): Lipschitz ``fbm_lipschitz(octaves, 2, 1/2)``, range ``fbm_range(octaves, 1/2)``
+    (each octave is a restriction of the 3D noise to a plane)."""
+    import mitsuba as mi
+    total = mi.Float(0.0)
+    for k in range(int(octaves)):
+        f = float(2 ** k)
+        total += (0.5 ** k) * planar_noise(x * f + 17.31 * k, y * f + 17.31 * k, seed + k)
+    return total
+
+
+def _code(o):
+    o = np.asarray(o) + _RANGE
+    return (o[..., 0] * (2 * _RANGE + 1) + o[..., 1]) * (2 * _RANGE + 1) + o[..., 2]
+
+
+def _decode(code):
+    w = 2 * _RANGE + 1
+    return np.stack([code // (w * w), (code // w) % w, code % w], -1) - _RANGE
+
+
+def image_boxes(tile, grow: float):
+    """Per block, the box of ``{u_k . p <= w_k + grow}`` (``(B, 3)`` lo and hi)."""
+    lo = np.empty((tile.n_blocks, 3))
+    hi = np.empty((tile.n_blocks, 3))
+    for i in range(tile.n_blocks):
+        n, w = tile.planes(i)
+        lo[i], hi[i] = offset_box(n.astype(np.float64), w.astype(np.float64),
+                                  tile.centroid[i].astype(np.float64), grow)
+    return lo, hi
+
+
+def _cell_lists(keys_cells):
+    """CSR lists from ``(cell, entry, priority)`` triples."""
+    cell, entry, prio, n_cells = keys_cells
+    order = np.lexsort((prio, cell))
+    count = np.bincount(cell, minlength=n_cells)
+    start = np.concatenate([[0], np.cumsum(count)[:-1]])
+    return start.astype(np.uint32), count.astype(np.uint32), entry[order].astype(np.uint32)
+
+
+class BlockField(Node):
+    """Replicated blocks ``t(p)`` of a :class:`~.tile_cache.BlockTile` (module docstring).
+
+    Parameters
+    ----------
+    tile : BlockTile
+        Planes of the blocks of one periodic tile.
+    smoothness : float
+        Radius ``R`` of the smooth intersection (m), > 0.
+    warp : float
+        Amplitude ``e`` of the triplanar surface detail (m), >= 0.
+    warp_wavelength : float
+        Wavelength ``lambda`` of the detail (m), > 0.
+    warp_octaves : int
+        Octaves of the detail fBm.
+    seed : int
+        Seed of the detail.
+    presence : numpy.ndarray, optional
+        ``(nx, ny, nz, B)`` booleans: block ``i`` present in virtual cell
+        ``tiles_lo + (x, y, z)``; default: every block in every cell (unbounded).
+    tiles_lo : array_like
+        Integer index of the first virtual cell of ``presence``.
+    margin : float
+        The clamp ``m`` (m).
+    cell_size : float, optional
+        Edge of the lookup cells (default half the median middle extent of the
+        blocks, rounded to an integer number of cells per tile edge).
+    """
+
+    kind = "blocks_field"
+
+    def __init__(self, tile, smoothness=0.25, warp=0.0, warp_wavelength=1.0, warp_octaves=2,
+                 seed=0, presence=None, tiles_lo=(0, 0, 0), margin=0.25, cell_size=None):
+        import drjit as dr
+        import mitsuba as mi
+        if not smoothness > 0:
+            raise ValueError(f"smoothness must be > 0 (got {smoothness})")
+        if not warp >= 0 or not warp_wavelength > 0:
+            raise ValueError("warp must be >= 0 and warp_wavelength > 0")
+        if not margin > 0:
+            raise ValueError("margin must be > 0")
+        self.tile = tile
+        s = float(tile.size)
+        self.s_np, self.m_np, self.R_np = s, float(margin), float(smoothness)
+        self.warp_np, self.wavelength_np = float(warp), float(warp_wavelength)
+        self.octaves = int(warp_octaves)
+        self.detail_max = self.warp_np * fbm_range(self.octaves, 0.5) if self.warp_np > 0 else 0.0
+        grow = self.m_np + self.detail_max
+        blo, bhi = image_boxes(tile, grow)
+        if not cell_size:
+            # About half the typical block's middle extent: few copies per cell.
+            mid = np.median(np.sort(bhi - blo - 2 * grow, axis=1)[:, 1])
+            cell_size = float(np.clip(0.5 * mid, s / 24, s / 2))
+        res = max(int(round(s / cell_size)), 1)
+        cell = s / res
+        self.res_t, self.cell_t = res, cell
+        # Images of every block whose grown box meets the tile [0, s)^3.
+        o_lo = np.floor(-bhi / s).astype(int) + 1
+        o_hi = np.ceil((s - blo) / s).astype(int) - 1
+        if np.any(o_lo < -_RANGE) or np.any(o_hi > _RANGE):
+            raise ValueError("a block is larger than two tiles: increase the tile size")
+        cells, entries, prios = [], [], []
+        for i in range(tile.n_blocks):
+            for ox in range(o_lo[i, 0], o_hi[i, 0] + 1):
+                for oy in range(o_lo[i, 1], o_hi[i, 1] + 1):
+                    for oz in range(o_lo[i, 2], o_hi[i, 2] + 1):
+                        o = np.array([ox, oy, oz])
+                        lo, hi = blo[i] + o * s, bhi[i] + o * s
+                        i0 = np.clip(np.floor(lo / cell).astype(int), 0, res - 1)
+                        i1 = np.clip(np.floor(hi / cell).astype(int), 0, res - 1)
+                        if np.any(hi < 0) or np.any(lo > s):
+                            continue
+                        g = np.stack(np.meshgrid(*[np.arange(i0[a], i1[a] + 1) for a in range(3)],
+                                                 indexing="ij"), -1).reshape(-1, 3)
+                        centre = (g + 0.5) * cell
+                        cells.append((g[:, 0] * res + g[:, 1]) * res + g[:, 2])
+                        entries.append(np.full(len(g), i * _CODES + _code(o)))
+                        prios.append(np.linalg.norm(centre - (tile.centroid[i] + o * s), axis=1))
+        start, count, index = _cell_lists((np.concatenate(cells), np.concatenate(entries),
+                                           np.concatenate(prios), res ** 3))
+        self.max_per_cell, self.list_len = int(count.max()), len(index)
+        self._start, self._count, self._index = mi.UInt32(start), mi.UInt32(count), mi.UInt32(index)
+        f32 = lambda x: mi.Float(np.ascontiguousarray(x, dtype=np.float32))  # noqa: E731
+        # Interleaved (u_x, u_y, u_z, w) per plane: one packet gather per plane.
+        self._planes = f32(np.hstack([tile.normals, tile.offsets[:, None]]).reshape(-1))
+        self._pstart, self._pcount = mi.UInt32(tile.start), mi.UInt32(tile.count)
+        self._s, self._inv_s = opaque_float(s), opaque_float(1.0 / s)
+        self._inv_cell = opaque_float(1.0 / cell)
+        self._m, self._R = opaque_float(self.m_np), opaque_float(self.R_np)
+        self._warp, self._inv_wl = opaque_float(self.warp_np), opaque_float(1.0 / self.wavelength_np)
+        self._seed = dr.opaque(mi.UInt32, int(seed) & 0xFFFFFFFF)
+        self._setup_presence(presence, tiles_lo, blo, bhi)
+
+    # -- presence and the world grid -------------------------------------------------
+    def _setup_presence(self, presence, tiles_lo, blo, bhi):
+        import mitsuba as mi
+        self.presence_np = None
+        self.world_lo = None
+        if presence is None:
+            return
+        presence = np.asarray(presence, dtype=bool)
+        if presence.ndim != 4 or presence.shape[3] != self.tile.n_blocks:
+            raise ValueError("presence must have shape (nx, ny, nz, n_blocks)")
+        self.presence_np, self.tiles_lo = presence, np.asarray(tiles_lo, int)
+        s = self.s_np
+        t_idx, b_idx = np.nonzero(presence.reshape(-1, self.tile.n_blocks))
+        self.n_present = len(b_idx)
+        if self.n_present == 0:
+            return
+        T = np.stack(np.unravel_index(t_idx, presence.shape[:3]), -1) + self.tiles_lo
+        shift = T * s
+        lo, hi = blo[b_idx] + shift, bhi[b_idx] + shift
+        # The registered boxes contain {t > -m}, a fortiori the solid.
+        self.world_lo, self.world_hi = lo.min(0), hi.max(0)
+        cw = self.cell_t
+        res = np.maximum(np.ceil((self.world_hi - self.world_lo) / cw).astype(int), 1)
+        while np.prod(res) > 96 ** 3:
+            cw *= 1.25
+            res = np.maximum(np.ceil((self.world_hi - self.world_lo) / cw).astype(int), 1)
+        self.world_res, self.world_cell = res, cw
+        # The present copies, listed in the world cells their grown boxes meet
+        # (nearest first). Same exactness argument as the tile-local lists, with no
+        # presence test left for the kernel.
+        i0 = np.clip(np.floor((lo - self.world_lo) / cw).astype(int), 0, res - 1)
+        i1 = np.clip(np.floor((hi - self.world_lo) / cw).astype(int), 0, res - 1)
+        cells, entries, prios = [], [], []
+        occ = np.zeros(tuple(res), dtype=bool)
+        cen = self.tile.centroid[b_idx] + shift
+        for c in range(self.n_present):
+            a, b = i0[c], i1[c]
+            occ[a[0]:b[0] + 1, a[1]:b[1] + 1, a[2]:b[2] + 1] = True
+            g = np.stack(np.meshgrid(*[np.arange(a[k], b[k] + 1) for k in range(3)], indexing="ij"),
+                         -1).reshape(-1, 3)
+            cells.append((g[:, 0] * res[1] + g[:, 1]) * res[2] + g[:, 2])
+            entries.append(np.full(len(g), c))
+            prios.append(np.linalg.norm(self.world_lo + (g + 0.5) * cw - cen[c], axis=1))
+        start, count, index = _cell_lists((np.concatenate(cells), np.concatenate(entries),
+                                           np.concatenate(prios), int(np.prod(res))))
+        self.world_list_len, self.world_max_per_cell = len(index), int(count.max())
+        self._wstart, self._wcount, self._windex = mi.UInt32(start), mi.UInt32(count), mi.UInt32(index)
+        f32 = lambda x: mi.Float(np.ascontiguousarray(x, dtype=np.float32))  # noqa: E731
+        self._cblock = mi.UInt32(b_idx.astype(np.uint32))
+        self._cx, self._cy, self._cz = (f32(shift[:, k]) for k in range(3))
+        from scipy.ndimage import distance_transform_edt
+        k = distance_transform_edt(~occ)
+        self._wempty = mi.Float(np.maximum((k - np.sqrt(3.0)) * cw, 0.0).reshape(-1).astype(np.float32))
+        self._wlo = [opaque_float(v) for v in self.world_lo]
+        self._whi = [opaque_float(v) for v in self.world_lo + res * cw]
+        self._winv = opaque_float(1.0 / cw)
+
+    def _world_cell(self, p):
+        import drjit as dr
+        import mitsuba as mi
+        rx, ry, rz = (int(v) for v in self.world_res)
+        ix = mi.UInt32(dr.clip((p.x - self._wlo[0]) * self._winv, 0.0, rx - 1.0))
+        iy = mi.UInt32(dr.clip((p.y - self._wlo[1]) * self._winv, 0.0, ry - 1.0))
+        iz = mi.UInt32(dr.clip((p.z - self._wlo[2]) * self._winv, 0.0, rz - 1.0))
+        return (ix * ry + iy) * rz + iz
+
+    # -- evaluation ------------------------------------------------------------------
+    def _detail(self, p):
+        """``d(gamma_i(p))`` for the projections on ``yz, xz, xy`` (weights of e_x, e_y, e_z)."""
+        q = p * self._inv_wl
+        return (planar_fbm(q.y, q.z, self.octaves, self._seed),
+                planar_fbm(q.x, q.z, self.octaves, self._seed + 7919),
+                planar_fbm(q.x, q.y, self.octaves, self._seed + 15838))
+
+    def _fold(self, b, x, present, best, det):
+        """``(max(best, b_b(x)), v)`` where present; the plane fold stops once below
+        ``best``, so ``v >= b_b(x)`` is the value or an upper bound of it."""
+        import drjit as dr
+        import mitsuba as mi
+        k0 = dr.gather(mi.UInt32, self._pstart, b)
+        k1 = dr.select(present, k0 + dr.gather(mi.UInt32, self._pcount, b), k0)
+        # The first six planes of a block are its box faces +x, +y, +z, -x, -y, -z
+        # (see tile_cache.build_tile): unit normals, so no dot products.
+        w = [dr.gather(mi.Float, self._planes, 4 * (k0 + i) + 3) for i in range(6)]
+        box = (w[0] - x.x, w[1] - x.y, w[2] - x.z, w[3] + x.x, w[4] + x.y, w[5] + x.z)
+        v = mi.Float(1e30)
+        for axis, h in zip((0, 1, 2, 0, 1, 2), box):
+            if det is not None:
+                h = h + self._warp * det[axis]
+            v = -smooth_max(-v, -h, self._R)
+
+        def plane_body(k, v):
+            g = dr.gather(mi.Vector4f, self._planes, k)
+            n = mi.Vector3f(g.x, g.y, g.z)
+            h = g.w - dr.dot(n, x)
+            if det is not None:
+                a = dr.abs(n)
+                h += self._warp * (a.x * det[0] + a.y * det[1] + a.z * det[2]) / (a.x + a.y + a.z)
+            return k + 1, -smooth_max(-v, -h, self._R)
+
+        # A fold only decreases: stop once it cannot beat the running maximum.
+        _, v = dr.while_loop((k0 + 6, v), lambda k, v: (k < k1) & (v > best),
+                             plane_body, label="block_planes")
+        return dr.select(present, dr.maximum(best, v), best), dr.select(present, v, -1e30)
+
+    def _tiled(self, p):
+        """``t`` by the mod-tiling, every block present (tile-local lists)."""
+        import drjit as dr
+        import mitsuba as mi
+        T = dr.floor(p * self._inv_s)
+        q = p - T * self._s
+        res = self.res_t
+        ci = [mi.UInt32(dr.clip(q[a] * self._inv_cell, 0.0, res - 1.0)) for a in range(3)]
+        cell = (ci[0] * res + ci[1]) * res + ci[2]
+        start = dr.gather(mi.UInt32, self._start, cell)
+        count = dr.gather(mi.UInt32, self._count, cell)
+        det = self._detail(p) if self.warp_np > 0 else None
+        w = 2 * _RANGE + 1
+
+        def body(j, best):
+            e = dr.gather(mi.UInt32, self._index, start + j)
+            b = e // _CODES
+            code = e - b * _CODES
+            o = mi.Vector3f(mi.Float(mi.Int32(code // (w * w)) - _RANGE),
+                            mi.Float(mi.Int32((code // w) % w) - _RANGE),
+                            mi.Float(mi.Int32(code % w) - _RANGE))
+            return j + 1, self._fold(b, q - o * self._s, mi.Bool(True), best, det)[0]
+
+        return dr.while_loop((mi.UInt32(0), -self._m + mi.Float(0.0)), lambda j, best: j < count,
+                             body, label="block_images")[1]
+
+    def _present(self, p, cell):
+        """``t`` over the present copies listed in the world cell of ``p``."""
+        import drjit as dr
+        import mitsuba as mi
+        start = dr.gather(mi.UInt32, self._wstart, cell)
+        count = dr.gather(mi.UInt32, self._wcount, cell)
+        det = self._detail(p) if self.warp_np > 0 else None
+
+        def body(j, best, upper):
+            c = dr.gather(mi.UInt32, self._windex, start + j)
+            b = dr.gather(mi.UInt32, self._cblock, c)
+            x = p - mi.Vector3f(dr.gather(mi.Float, self._cx, c), dr.gather(mi.Float, self._cy, c),
+                                dr.gather(mi.Float, self._cz, c))
+            best, v = self._fold(b, x, mi.Bool(True), best, det)
+            return j + 1, best, dr.maximum(upper, v)
+
+        _, best, upper = dr.while_loop((mi.UInt32(0), -self._m + mi.Float(0.0), mi.Float(-1e30)),
+                                       lambda j, best, upper: j < count, body, label="block_copies")
+        return best, upper
+
+    def eval(self, p):
+        return self._eval(p)[0]
+
+    def _eval(self, p):
+        """``(t, extra)``; ``extra`` = (empty-space distance, upper bound of the listed
+        copies, distance to the world cell's faces) for :meth:`eval_bounds`."""
+        import drjit as dr
+        import mitsuba as mi
+        if self.presence_np is None:
+            return self._tiled(p), None
+        if self.world_lo is None:
+            return -self._m + mi.Float(0.0) * p.x, None
+        outside = box_distance(p, self._wlo, self._whi)
+        cell = self._world_cell(p)
+        count = dr.gather(mi.UInt32, self._wcount, cell)
+        f, upper = dr.if_stmt((p, cell), (outside <= 0.0) & (count > 0),
+                              lambda p, cell: self._present(p, cell),
+                              lambda p, cell: (-self._m + mi.Float(0.0) * p.x, mi.Float(-1e30)),
+                              label="blocks_near")
+        empty = dr.maximum(dr.gather(mi.Float, self._wempty, cell), outside)
+        rel = (p - mi.Point3f(*self._wlo)) * self._winv
+        frac = rel - dr.floor(rel)
+        face = dr.minimum(dr.min(frac), dr.min(1.0 - frac)) / self._winv
+        return dr.select(outside > 0.0, -self._m - outside, f), (empty, upper, face)
+
+    def eval_bounds(self, p, levels, direction=None):
+        """Distances to ``{t >= -c}``: Hart's ``-t / L``; for ``c < m`` also the larger of
+        the empty-space distance and ``min(-v_max / L, m - c + face)``, where ``v_max``
+        bounds the listed copies and ``face`` is the distance to the world cell's
+        faces (an unlisted copy's solid, grown by ``m``, lies outside the cell)."""
+        import drjit as dr
+        f, extra = self._eval(p)
+        inv = 1.0 / self.lipschitz
+        out = []
+        for c in levels:
+            d = dr.maximum(-f - c, 0.0) * inv
+            if extra is not None and c < self.m_np:
+                empty, upper, face = extra
+                listed = dr.maximum(-upper - c, 0.0) * inv
+                d = dr.maximum(d, dr.maximum(empty, dr.minimum(listed, self.m_np - c + face)))
+            out.append(d)
+        return f, tuple(out)
+
+    # -- protocol --------------------------------------------------------------------
+    def bounds(self):
+        if self.presence_np is None:
+            return np.full(3, -np.inf), np.full(3, np.inf)
+        if self.world_lo is None:
+            return np.zeros(3), -np.ones(3)  # empty
+        return self.world_lo.copy(), self.world_hi.copy()
+
+    # Clamped at -m within the world grid: no unit-rate falloff from the box.
+    unit_falloff = False
+
+    @property
+    def lipschitz(self):
+        slope = self.warp_np * fbm_lipschitz(self.octaves, 2.0, 0.5) / self.wavelength_np
+        return 1.0 + slope
+
+    @property
+    def cost(self):
+        return 4.0 + min(self.max_per_cell, 16) * 3.0 + (18.0 * self.octaves if self.warp_np else 0.0)
+
+    def nbytes(self):
+        n = 64 + self.tile.nbytes() + self.res_t ** 3 * 8 + self.list_len * 4
+        if self.world_lo is not None:
+            n += int(np.prod(self.world_res)) * 12 + self.world_list_len * 4 + self.n_present * 16
+        return n
