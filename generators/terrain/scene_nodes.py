@@ -115,7 +115,7 @@ def _skeletal_set(t: Table, ctx):
 
 
 def _implicit_heightfield(t: Table, ctx):
-    hf = core._heightfield(t, ctx)  # the core keys: extent, source, file or fbm, base
+    hf = core.heightfield_node(t, ctx)  # the core keys: extent, source, file or fbm, base
     R = t.number("R", None, lo=0, lo_open=True)
     T = t.number("T", None, lo=0, lo_open=True)
     bumps = None
@@ -127,7 +127,7 @@ def _implicit_heightfield(t: Table, ctx):
     amp = None
     sub = t.table("amplification", None)
     if sub is not None:
-        amp = core._fbm_args(sub)
+        amp = core.fbm_args(sub)
         sub.finish()
     try:
         return ImplicitHeightfield(hf.heights_np, hf.extent, R=R, T=T, base=t.data.get("base"),
@@ -140,17 +140,17 @@ def _implicit_heightfield(t: Table, ctx):
         raise t.error(key, msg) from None
 
 
-def _children(t, ctx):
-    return core._children(t, ctx, 1)
+def children(t, ctx):
+    return core.children(t, ctx, 1)
 
 
 NODE_TYPES = {
     "implicit_heightfield": _implicit_heightfield,
     "skeletal_set": _skeletal_set,
-    "sum": lambda t, c: Sum(*_children(t, c)),
-    "local_warp": lambda t, c: LocalWarp(core._child(t, c), c.build(t.raw("control"), t, "control"),
-                                         **core._fbm_args(t, octaves=3)),
-    "erosion": lambda t, c: Erosion(core._child(t, c), c.build(t.raw("field"), t, "field"),
+    "sum": lambda t, c: Sum(*children(t, c)),
+    "local_warp": lambda t, c: LocalWarp(core.child(t, c), c.build(t.raw("control"), t, "control"),
+                                         **core.fbm_args(t, octaves=3)),
+    "erosion": lambda t, c: Erosion(core.child(t, c), c.build(t.raw("field"), t, "field"),
                                     c.build(t.raw("resistance"), t, "resistance")),
     "resistance_turbulence": lambda t, c: G.Turbulence(
         t.number("wavelength", lo=0, lo_open=True), t.number("amplitude", 0.5), t.number("offset", 0.5),
@@ -167,11 +167,11 @@ NODE_TYPES = {
                                                         t.number("R", lo=0, lo_open=True),
                                                         t.number("weight", 1.0)),
     "resistance_constant": lambda t, c: G.Constant(t.number("value")),
-    "resistance_blend": lambda t, c: G.Blend(*_children(t, c)),
-    "resistance_fold": lambda t, c: G.Fold(core._child(t, c), t.number("amplitude"),
-                                           **{k: v for k, v in core._fbm_args(t, octaves=3).items()
+    "resistance_blend": lambda t, c: G.Blend(*children(t, c)),
+    "resistance_fold": lambda t, c: G.Fold(core.child(t, c), t.number("amplitude"),
+                                           **{k: v for k, v in core.fbm_args(t, octaves=3).items()
                                               if k != "amplitude"}),
-    "resistance_fault": lambda t, c: G.Fault(core._child(t, c), t.vector("point"),
+    "resistance_fault": lambda t, c: G.Fault(core.child(t, c), t.vector("point"),
                                              t.vector("normal", nonzero=True), t.vector("slip"),
                                              t.number("width", 1.0, lo=0, lo_open=True)),
 }

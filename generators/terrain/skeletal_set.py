@@ -24,7 +24,7 @@ non-negative primitives. The node's value is ``F(p) - threshold``.
 
 Acceleration: the primitives' support boxes (skeleton box grown by
 ``c_i + R_i (1 + A N)``, ``N`` the fBm range) are listed per cell of a uniform grid
-(CSR lists built by :func:`arches_render.field.primitive_set._grid_lists`, the
+(CSR lists built by :func:`arches_render.field.primitive_set.grid_lists`, the
 grid of :class:`~arches_render.field.CapsuleSet`); a point loops over its own
 cell's list in one Dr.Jit ``while_loop``. Unlike the capsule set this is *exact*:
 a primitive missing from the cell contributes exactly 0 there (compact support).
@@ -64,7 +64,7 @@ import numpy as np
 
 from arches_render.field.node import Node, opaque_float
 from arches_render.field.noise import fbm, fbm_lipschitz, fbm_range
-from arches_render.field.primitive_set import _empty_distance, _grid_lists
+from arches_render.field.primitive_set import empty_distance, grid_lists
 
 from .falloff import G_SLOPE, g_dr
 
@@ -184,12 +184,12 @@ class SkeletalSet(Node):
             cell *= 1.25
         res = np.maximum(np.ceil(extent / cell).astype(np.int64), 1)
         self.grid_lo, self.cell, self.res = self.support_lo.copy(), cell, res
-        start, count, index = _grid_lists(lo_p, hi_p, self.grid_lo, cell, res)
+        start, count, index = grid_lists(lo_p, hi_p, self.grid_lo, cell, res)
         self.max_per_cell, self.list_len = int(count.max()), len(index)
         self._per_prim_lipschitz = self._prim_lipschitz()
         self._cell_bounds(start, count, index)
         # Empty-space distances serve only levels below a positive threshold.
-        self._empty = (mi.Float(_empty_distance(lo_p, hi_p, self.grid_lo, cell, res).astype(np.float32))
+        self._empty = (mi.Float(empty_distance(lo_p, hi_p, self.grid_lo, cell, res).astype(np.float32))
                        if self.threshold_np > 0 else None)
         self._cell_L = mi.Float(self.cell_lipschitz_np.astype(np.float32) * np.float32(1.0 + 1e-6))
         self._cell_M = mi.Float(self.cell_value_max_np.astype(np.float32) * np.float32(1.0 + 1e-6))
