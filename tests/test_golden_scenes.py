@@ -12,7 +12,8 @@ SHIPPED = sorted(p.stem for p in SCENES.glob("*.toml"))
 WIDTH, HEIGHT, TEST_SPP, REF_SPP = 128, 72, 32, 1024
 # Scenes whose image mean is noisier get more test samples, so that the 1 % mean
 # rule keeps a margin of several sigma (see the calibration in golden/NAME.json).
-TEST_SPP_OF = {"boulders": 96, "sea_cave": 96}
+TEST_SPP_OF = {"boulders": 96, "sea_cave": 96, "gmaps_arch": 96, "gmaps_drilling": 96, "gmaps_cavern": 96,
+               "terrain_sea": 96}
 
 
 @pytest.mark.parametrize("name", SHIPPED)

@@ -127,3 +127,14 @@ def test_turntable_bad_input(rock, tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["turntable", str(rock), "-o", str(tmp_path), "--frames", "0"])
     assert main(["turntable", str(tmp_path / "missing.toml"), "-o", str(tmp_path)]) == 2
+
+
+def test_turntable_of_a_mesh_only_scene(tmp_path):
+    """Scenes without a [field] (evolved G-map volumes, say) orbit their camera target too."""
+    from helpers import SCENES
+    assert main(["turntable", str(SCENES / "gmaps_arch.toml"), "-o", str(tmp_path), "--frames", "2",
+                 "--spp", "1", "--resolution", "16x9", "-q"]) == 0
+    frames = sorted(tmp_path.glob("gmaps_arch.*.exr"))
+    assert [f.name for f in frames] == ["gmaps_arch.1001.exr", "gmaps_arch.1002.exr"]
+    a, b = (read_exr(f).rgb for f in frames)
+    assert a.mean() > 0 and not np.array_equal(a, b)

@@ -52,8 +52,6 @@ def run(args) -> int:
     if view not in VIEWS:
         raise UsageError(f"--view must be one of {', '.join(VIEWS)} (got {view!r})")
     desc = load_scene(args.scene)
-    if desc.field is None:
-        raise UsageError(f"{args.scene}: field: turntables render the field; the scene has no [field]")
     out = Path(args.output)
     if out.suffix.lower() in (".exr", ".mp4", ".png"):
         raise UsageError(f"-o/--output is a folder for the frames (got {out})")

@@ -39,7 +39,7 @@ import numpy as np
 from .node import Node, box_distance, opaque_float
 
 
-def _grid_lists(lo_boxes, hi_boxes, grid_lo, cell, res):
+def grid_lists(lo_boxes, hi_boxes, grid_lo, cell, res):
     """CSR lists of the primitives overlapping each cell (vectorized over primitives)."""
     i0 = np.clip(np.floor((lo_boxes - grid_lo) / cell).astype(np.int64), 0, res - 1)
     i1 = np.clip(np.floor((hi_boxes - grid_lo) / cell).astype(np.int64), 0, res - 1)
@@ -60,7 +60,7 @@ def _grid_lists(lo_boxes, hi_boxes, grid_lo, cell, res):
     return cell_start.astype(np.uint32), cell_count.astype(np.uint32), prim[order].astype(np.uint32)
 
 
-def _empty_distance(lo_boxes, hi_boxes, grid_lo, cell, res):
+def empty_distance(lo_boxes, hi_boxes, grid_lo, cell, res):
     """Per cell, a lower bound of the distance from any of its points to the set."""
     from scipy.ndimage import distance_transform_edt
     i0 = np.clip(np.floor((lo_boxes - grid_lo) / cell).astype(np.int64), 0, res - 1)
@@ -116,8 +116,8 @@ class CapsuleSet(Node):
         res = np.maximum(np.ceil((self.prim_hi + m - grid_lo) / cell).astype(np.int64), 1)
         self.grid_lo, self.cell, self.res = grid_lo, cell, res
         self.grid_hi = grid_lo + res * cell
-        start, count, index = _grid_lists(lo_p - m, hi_p + m, grid_lo, cell, res)
-        self._empty = mi.Float(_empty_distance(lo_p, hi_p, grid_lo, cell, res).astype(np.float32))
+        start, count, index = grid_lists(lo_p - m, hi_p + m, grid_lo, cell, res)
+        self._empty = mi.Float(empty_distance(lo_p, hi_p, grid_lo, cell, res).astype(np.float32))
         self.max_per_cell = int(count.max())
         self.list_len = len(index)
         self._start, self._count, self._index = mi.UInt32(start), mi.UInt32(count), mi.UInt32(index)

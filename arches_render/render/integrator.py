@@ -83,7 +83,7 @@ class ImplicitPathIntegrator(mi.SamplingIntegrator):
             return si, mi.Bool(False)
         tmax = dr.select(si.is_valid(), si.t, ray.maxt)
         hit, t = self.tracer.trace(ray.o, ray.d, tmax, active)
-        p, n = self.tracer.surface(ray.o + ray.d * t, t)
+        p, n = self.tracer.surface(ray.o + ray.d * t, t, ray.d)
         # Lift the point off the surface so that rays spawned here start in air.
         offset = dr.maximum(1e-5 * self.tracer.scale_op, 0.1 * self.tracer.eps * t)
         sf = dr.zeros(mi.SurfaceInteraction3f)

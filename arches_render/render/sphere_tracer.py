@@ -122,8 +122,9 @@ class SphereTracer:
         t, _, _, _, _, hit, _, _, _, _, _ = dr.while_loop(state, cond, body, label="sphere_trace")
         return hit & active, t
 
-    def surface(self, p, t):
-        """Surface point and outward normal for hits ``p`` found at distance ``t``.
+    def surface(self, p, t, d=None):
+        """Surface point and outward normal for hits ``p`` found at distance ``t``
+        along direction ``d``.
 
         A hit stops up to ``eps t`` in front of the surface; one Newton step along
         the gradient, ``p - f grad f / |grad f|^2``, puts it on the surface up to
@@ -133,7 +134,10 @@ class SphereTracer:
         Returns
         -------
         (mi.Point3f, mi.Vector3f)
-            Projected point and unit normal ``-grad f / |grad f|``.
+            Projected point and unit normal ``-grad f / |grad f|``. Where the
+            gradient vanishes (a ray that starts inside a saturated field, e.g.
+            deep in an implicit heightfield whose value is constant there) the
+            normal faces the ray, ``-d`` (or +Z without ``d``), instead of NaN.
         """
         import drjit as dr
         from ..field import gradient
@@ -144,4 +148,7 @@ class SphereTracer:
         step = dr.select(g2 > 0.0, f / g2, 0.0)
         # Never move farther than the tolerance that stopped the ray.
         step = dr.clip(step * dr.sqrt(g2), -self.eps * t, self.eps * t) * dr.rsqrt(dr.maximum(g2, 1e-30))
-        return p - g * step, -dr.normalize(g)
+        import mitsuba as mi
+        fallback = -d if d is not None else mi.Vector3f(0.0, 0.0, 1.0)
+        n = dr.select(g2 > 1e-30, -g * dr.rsqrt(dr.maximum(g2, 1e-30)), fallback)
+        return p - g * step, n

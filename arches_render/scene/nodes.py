@@ -47,7 +47,11 @@ from .errors import SceneError
 from .validate import Table
 
 
-def _fbm_args(t: Table, amplitude=1.0, wavelength=1.0, octaves=4):
+def fbm_args(t: Table, amplitude=1.0, wavelength=1.0, octaves=4):
+    """The fBm keys (amplitude, wavelength, octaves, lacunarity, gain, seed) of a node table.
+
+    Shared by every node with noise, core or generator's, so the keys and ranges agree.
+    """
     return dict(amplitude=t.number("amplitude", amplitude),
                 wavelength=t.number("wavelength", wavelength, lo=0, lo_open=True),
                 octaves=t.integer("octaves", octaves, lo=1, hi=12),
@@ -56,41 +60,29 @@ def _fbm_args(t: Table, amplitude=1.0, wavelength=1.0, octaves=4):
                 seed=t.integer("seed", 0, lo=0, hi=2 ** 32 - 1))
 
 
-def _load_heights(t: Table, base_dir: Path) -> np.ndarray:
-    path = base_dir / t.string("file")
-    if not path.is_file():
-        raise t.error("file", f"no such file: {path}")
+def load_heights(t: Table, base_dir: Path) -> np.ndarray:
+    """Heights (metres) of the table's ``file``, scaled by ``height_scale`` and offset.
+
+    One DEM reader for scenes and ``amplify`` (formats, no-data filling, size limits).
+    """
+    # One DEM reader for scenes and `amplify` (formats, no-data filling, size limits).
+    from ..generators.terrain.dem_io import DEMError, read_dem
     try:
-        if path.suffix.lower() == ".npy":
-            H = np.load(path, allow_pickle=False).astype(np.float64)
-        elif path.suffix.lower() in (".png", ".tif", ".tiff"):
-            import imageio.v3 as iio
-            raw = iio.imread(path)
-            H = raw.astype(np.float64)
-            if H.ndim == 3:
-                H = H[..., 0]
-            H /= float(np.iinfo(raw.dtype).max) if np.issubdtype(raw.dtype, np.integer) else 1.0
-        else:
-            raise t.error("file", "must be a .npy, .png or .tif heightmap")
-    except SceneError:
-        raise
-    except Exception as exc:  # unreadable file: name it, no traceback
-        raise t.error("file", f"cannot read {path}: {exc}") from None
-    if H.ndim != 2 or min(H.shape) < 2:
-        raise t.error("file", f"must hold a 2-D array of at least 2x2 heights (got shape {H.shape})")
-    if not np.all(np.isfinite(H)):
-        raise t.error("file", "contains NaN or infinite heights")
+        H = read_dem(base_dir / t.string("file"), max_samples=8192 * 8192).heights
+    except DEMError as exc:
+        raise t.error("file", str(exc)) from None
     return H * t.number("height_scale", 1.0) + t.number("height_offset", 0.0)
 
 
-def _heightfield(t: Table, ctx):
+def heightfield_node(t: Table, ctx):
+    """A ``heightfield`` node from its table (also the core of ``implicit_heightfield``)."""
     x0, y0, x1, y1 = t.vector("extent", 4)
     if not (x1 > x0 and y1 > y0):
         raise t.error("extent", f"must be [x0, y0, x1, y1] with x1 > x0 and y1 > y0 (got {[x0, y0, x1, y1]})")
     base = t.number("base", None)
     source = t.string("source", "fbm", choices={"fbm", "file"})
     if source == "file":
-        H = _load_heights(t, ctx.base_dir)
+        H = load_heights(t, ctx.base_dir)
     else:
         from ..generators.terrain.fbm_heightmap import fbm_heightmap
         res = t.raw("resolution", [256, 256])
@@ -101,18 +93,20 @@ def _heightfield(t: Table, ctx):
                           power=t.number("power", 1.0, lo=0.1, hi=8.0),
                           offset=t.number("offset", 0.0),
                           edge_falloff=t.number("edge_falloff", 0.0, lo=0.0),
-                          **_fbm_args(t, amplitude=30.0, wavelength=80.0, octaves=6))
+                          **fbm_args(t, amplitude=30.0, wavelength=80.0, octaves=6))
     return F.Heightfield(H, (x0, y0, x1, y1), base=base)
 
 
-def _children(t: Table, ctx, minimum):
+def children(t: Table, ctx, minimum):
+    """The operand nodes of ``children`` (at least ``minimum``)."""
     items = t.raw("children")
     if not isinstance(items, list) or len(items) < minimum:
         raise t.error("children", f"must be an array of at least {minimum} node names or tables")
     return [ctx.build(item, t, f"children[{i}]") for i, item in enumerate(items)]
 
 
-def _child(t: Table, ctx):
+def child(t: Table, ctx):
+    """The operand node of ``child``."""
     return ctx.build(t.raw("child"), t, "child")
 
 
@@ -140,21 +134,21 @@ NODE_TYPES = {
                               t.number("rounding", 0.0, lo=0.0)),
     "capsule": lambda t, c: F.Capsule(t.vector("a"), t.vector("b"), t.number("radius", lo=0, lo_open=True)),
     "plane": lambda t, c: F.Plane(t.vector("normal", nonzero=True), t.vector("point", default=[0, 0, 0])),
-    "heightfield": _heightfield,
-    "union": lambda t, c: F.Union(*_children(t, c, 1)),
-    "intersection": lambda t, c: F.Intersection(*_children(t, c, 1)),
-    "difference": lambda t, c: F.Difference(*_children(t, c, 2)),
-    "blend": lambda t, c: F.Blend(*_children(t, c, 1), radius=t.number("radius", lo=0, lo_open=True)),
+    "heightfield": heightfield_node,
+    "union": lambda t, c: F.Union(*children(t, c, 1)),
+    "intersection": lambda t, c: F.Intersection(*children(t, c, 1)),
+    "difference": lambda t, c: F.Difference(*children(t, c, 2)),
+    "blend": lambda t, c: F.Blend(*children(t, c, 1), radius=t.number("radius", lo=0, lo_open=True)),
     "smooth_intersection": lambda t, c: F.SmoothIntersection(
-        *_children(t, c, 1), radius=t.number("radius", lo=0, lo_open=True)),
-    "translate": lambda t, c: F.Transform.translate(_child(t, c), t.vector("offset")),
-    "rotate": lambda t, c: F.Transform.rotate(_child(t, c), t.vector("axis", nonzero=True),
+        *children(t, c, 1), radius=t.number("radius", lo=0, lo_open=True)),
+    "translate": lambda t, c: F.Transform.translate(child(t, c), t.vector("offset")),
+    "rotate": lambda t, c: F.Transform.rotate(child(t, c), t.vector("axis", nonzero=True),
                                               t.number("angle"), t.vector("pivot", default=[0, 0, 0])),
-    "scale": lambda t, c: F.Transform.scale(_child(t, c), _scale_factor(t),
+    "scale": lambda t, c: F.Transform.scale(child(t, c), _scale_factor(t),
                                             t.vector("pivot", default=[0, 0, 0])),
-    "noise": lambda t, c: F.Noise(**_fbm_args(t)),
-    "displace": lambda t, c: F.Displace(_child(t, c), **_fbm_args(t)),
-    "warp": lambda t, c: F.DomainWarp(_child(t, c), **_fbm_args(t, octaves=3)),
+    "noise": lambda t, c: F.Noise(**fbm_args(t)),
+    "displace": lambda t, c: F.Displace(child(t, c), **fbm_args(t)),
+    "warp": lambda t, c: F.DomainWarp(child(t, c), **fbm_args(t, octaves=3)),
     "capsule_set": _capsule_set,
 }
 

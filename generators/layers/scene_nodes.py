@@ -141,8 +141,8 @@ def _source(t: Table, ctx) -> MaterialStacks:
         H = np.full((ny, nx), t.number("elevation", 0.0))
         return _from_heights(t, H, extent, cell, column)
     from arches_render.field import Heightfield
-    from arches_render.scene.nodes import _load_heights
-    dem = _load_heights(t, ctx.base_dir)
+    from arches_render.scene.nodes import load_heights
+    dem = load_heights(t, ctx.base_dir)
     hf = Heightfield(dem, extent)
     X, Y = np.meshgrid(extent[0] + (np.arange(nx) + 0.5) * cell, extent[1] + (np.arange(ny) + 0.5) * cell)
     return _from_heights(t, _heightfield_heights(hf, X, Y), extent, cell, column)
