@@ -42,6 +42,8 @@ __all__ = ["BlockTile", "TileParams", "build_tile", "save_tile", "load_tile", "c
            "cache_dir"]
 
 FORMAT_VERSION = 4
+# The modules whose code decides a tile's blocks (see TileParams.key).
+_CODE_MODULES = ("poisson_disc", "fracture_discs", "fracture_graph", "block_hulls", "tile_cache")
 
 
 @dataclass(frozen=True)
@@ -91,7 +93,11 @@ class TileParams:
         return float(self.point_radius) if self.point_radius else self.size / 28.5
 
     def key(self) -> str:
-        text = json.dumps({"v": FORMAT_VERSION, **self.__dict__}, sort_keys=True, default=list)
+        """Cache key: the parameters (seed included) and a digest of the generating code,
+        so that a tile cached by older code is never served."""
+        from arches_render.source_digest import source_digest
+        code = source_digest(Path(__file__).resolve().parent, _CODE_MODULES, str(FORMAT_VERSION))
+        text = json.dumps({"v": FORMAT_VERSION, "code": code, **self.__dict__}, sort_keys=True, default=list)
         return hashlib.sha256(text.encode()).hexdigest()[:24]
 
 

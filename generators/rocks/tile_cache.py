@@ -30,11 +30,8 @@ _MEMORY: dict[str, RockStore] = {}
 
 def code_version() -> str:
     """Hash of the tile-generating source files and the tile format."""
-    h = hashlib.sha256(FORMAT.encode())
-    here = Path(__file__).resolve().parent
-    for name in _CODE_MODULES:
-        h.update((here / f"{name}.py").read_bytes())
-    return h.hexdigest()[:16]
+    from arches_render.source_digest import source_digest
+    return source_digest(Path(__file__).resolve().parent, _CODE_MODULES, FORMAT)
 
 
 def cache_key(params: TileParams) -> str:
