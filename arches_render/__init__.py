@@ -14,7 +14,15 @@ Conventions kept by every module
   through :func:`arches_render.field.evaluate`).
 
 The variant is chosen by :func:`arches_render.backend.set_variant` (``llvm_ad_rgb``
-by default); import it before touching ``mitsuba`` types.
+by default); call it (or :func:`arches_render.backend.variant`) before touching
+``mitsuba`` types. Importing this package points Dr.Jit at a usable libLLVM
+(:func:`arches_render.backend.prepare_llvm`), so import ``arches_render`` before
+``drjit``; every module of the package may then import ``drjit`` at its top.
 """
 
+from .backend import prepare_llvm
+
 __version__ = "0.1.0"
+
+# Before any module of ours imports drjit: Dr.Jit loads libLLVM on import.
+prepare_llvm()

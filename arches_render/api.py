@@ -38,7 +38,19 @@ import copy
 import sys
 from pathlib import Path
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
+
+from .backend import set_variant
+from .imaging.colour import view_to_uint8
+from .imaging.compare import Thresholds, compare as _compare
+from .imaging.exr import read_exr
+from .imaging.preview import write_png
+from .render.jobs import set_camera
+from .render.output import render_header, write_render
+from .render.renderer import build_scene, load_materials, render_layers
+from .scene import SceneError, parse_scene
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -93,9 +105,6 @@ def compare(ref, test, thresholds=None):
     ----------
     :func:`arches_render.imaging.compare.compare`.
     """
-    from .imaging.compare import Thresholds
-    from .imaging.compare import compare as _compare
-    from .imaging.exr import read_exr
     ref, test = (read_exr(x).rgb if isinstance(x, (str, Path)) else np.asarray(x, np.float32)
                  for x in (ref, test))
     return _compare(ref, test, thresholds or Thresholds(tile=0.05, flip=0.05))
@@ -122,9 +131,7 @@ class Lookdev:
     """
 
     def __init__(self, path, resolution=None, spp=None, seed=None):
-        from .backend import set_variant
         set_variant()
-        from .scene import SceneError, parse_scene
         self.path = Path(path)
         try:
             with open(self.path, "rb") as f:
@@ -141,7 +148,6 @@ class Lookdev:
 
     # ------------------------------------------------------------------ building
     def _build(self):
-        from .render.renderer import build_scene, load_materials
         self.bsdfs = load_materials(self.desc)
         self.scene = build_scene(self.desc, "field", self.width, self.height, bsdfs=self.bsdfs)
         self.rebuilds += 1
@@ -217,9 +223,6 @@ class Lookdev:
 
     def _apply(self, old, new):
         """Bring the live scene from ``old`` to ``new`` with parameter edits where possible."""
-        import mitsuba as mi
-
-        from .render.jobs import set_camera
         same = (old.render == new.render and old.meshes == new.meshes
                 and [l["type"] for l in old.lights] == [l["type"] for l in new.lights]
                 and set(old.materials) == set(new.materials)
@@ -246,7 +249,6 @@ class Lookdev:
 
     def _edit_material(self, name, old, new) -> bool:
         """Copy a material's new values into its live BSDF; False if its code must change."""
-        import mitsuba as mi
         a, b = old.materials[name], new.materials[name]
         masks_a, masks_b = old.material_masks.get(name, []), new.material_masks.get(name, [])
         if a == b and not masks_b:
@@ -291,9 +293,6 @@ class Lookdev:
         numpy.ndarray
             ``(H, W, 3)`` float32 linear Rec.709.
         """
-        import drjit as dr
-
-        from .render.renderer import render_layers
         s = self.desc.render
         spp = spp or self.spp or s.spp
         seed = s.seed if (seed if seed is not None else self.seed) is None else \
@@ -311,14 +310,11 @@ class Lookdev:
         return rgb
 
     def _aov_scene(self):
-        from .render.renderer import build_scene
         key = (id(self.scene), self.rebuilds)
         if getattr(self, "_aov_key", None) != key:
             self._aov = build_scene(self.desc, "field", self.width, self.height, aovs=True, bsdfs=self.bsdfs)
             self._aov_key = key
-        import mitsuba as mi
 
-        from .render.jobs import set_camera
         src, dst = mi.traverse(self.scene), mi.traverse(self._aov)
         for k in src.keys():
             if k.startswith("light") and k in dst:
@@ -331,9 +327,6 @@ class Lookdev:
         return self._aov
 
     def _write(self, path, rgb, layers, spp, seed, view):
-        from .imaging.colour import view_to_uint8
-        from .imaging.preview import write_png
-        from .render.output import render_header, write_render
         if path.suffix.lower() != ".exr":
             raise ValueError(f"render path must end in .exr (got {path})")
         path.parent.mkdir(parents=True, exist_ok=True)

@@ -6,13 +6,20 @@ the library but crash later, while compiling a kernel, with
 inside LLVM. We therefore
 
 1. point ``DRJIT_LIBLLVM_PATH`` at the newest libLLVM we can find (>= 16) when
-   the user has not chosen one, before ``drjit`` is imported, and
+   the user has not chosen one, before ``drjit`` is imported
+   (:func:`prepare_llvm`, run when the ``arches_render`` package is imported, so
+   every module of ours may import ``drjit`` at its top), and
 2. read ``/proc/self/maps`` after the import to learn which libLLVM was really
    loaded, and stop with :class:`BackendError` (a one-line message that says
    how to install ``libllvm19``) when it is missing or too old.
 
 ``cuda_ad_rgb`` is used when ``ARCHES_VARIANT`` asks for it or when it is the
 only variant that works; ``llvm_ad_rgb`` is the default everywhere.
+
+This module is a leaf: it imports nothing of arches-render. Our Python plugins
+(``implicit_path``, ``triplanar``) are registered where rendering starts
+(:func:`arches_render.render.plugins.ensure_registered`), not here, and
+:func:`variant_class` binds a plugin class to the variant chosen at run time.
 """
 
 from __future__ import annotations
@@ -87,6 +94,25 @@ def check_llvm(loaded: list[str]) -> None:
         raise BackendError(f"Dr.Jit loaded LLVM {major} ({path}), which {why}: {INSTALL_HINT}.")
 
 
+def prepare_llvm(name: str | None = None) -> None:
+    """Point Dr.Jit at the newest libLLVM >= 16 unless the user chose one.
+
+    Must run before ``drjit`` is first imported (Dr.Jit loads libLLVM then); the
+    ``arches_render`` package calls it on import.
+
+    Parameters
+    ----------
+    name : str, optional
+        The variant that will be used; default ``$ARCHES_VARIANT`` or
+        ``'llvm_ad_rgb'``. Only LLVM variants need a libLLVM.
+    """
+    name = name or os.environ.get("ARCHES_VARIANT", "llvm_ad_rgb")
+    if name.startswith("llvm") and "DRJIT_LIBLLVM_PATH" not in os.environ:
+        newest = find_newest_libllvm()
+        if newest:
+            os.environ["DRJIT_LIBLLVM_PATH"] = newest
+
+
 def set_variant(name: str | None = None) -> str:
     """Select the Mitsuba variant once per process and return its name.
 
@@ -110,10 +136,10 @@ def set_variant(name: str | None = None) -> str:
     name = name or os.environ.get("ARCHES_VARIANT", "llvm_ad_rgb")
     if _variant == name:
         return name
-    if name.startswith("llvm") and "DRJIT_LIBLLVM_PATH" not in os.environ:
-        newest = find_newest_libllvm()
-        if newest:
-            os.environ["DRJIT_LIBLLVM_PATH"] = newest
+    prepare_llvm(name)  # in case drjit is not imported yet (an explicit name)
+    # Imported here, not at the top: importing Dr.Jit loads libLLVM, which must
+    # wait until prepare_llvm has chosen it (and a backend error is reported by
+    # the caller, inside its error handling).
     import drjit as dr  # noqa: F401  (loads libLLVM)
     import mitsuba as mi
 
@@ -123,12 +149,46 @@ def set_variant(name: str | None = None) -> str:
         raise BackendError(f"Mitsuba variant '{name}' is not available; choose one of {mi.variants()}.")
     mi.set_variant(name)
     _variant = name
-    # Our Python plugins must be registered for every variant we switch to.
-    from . import plugins
-    plugins.register_all()
     return name
 
 
 def variant() -> str:
     """The active variant, selecting the default one on first use."""
     return _variant or set_variant()
+
+
+_BOUND: dict = {}
+
+
+def variant_class(name: str, impl: type, base: str) -> type:
+    """``impl`` as a class ``name`` deriving from the active variant's ``mi.<base>``.
+
+    Mitsuba's plugin base classes (``mi.BSDF``, ``mi.SamplingIntegrator``) exist per
+    variant, and the variant is chosen at run time, so a plugin is written as a
+    plain class ``impl`` and bound here. nanobind types take a single base, so the
+    body of ``impl`` is copied in, not mixed in: methods must call the base as
+    ``mi.<base>.__init__(self, props)``, never ``super()``.
+
+    Parameters
+    ----------
+    name : str
+        Name of the bound class (``'TriplanarBSDF'``).
+    impl : type
+        The plugin's implementation.
+    base : str
+        Name of the Mitsuba base class, e.g. ``'BSDF'``.
+
+    Returns
+    -------
+    type
+        The bound class, the same object on every call for one variant.
+    """
+    import mitsuba as mi  # after set_variant (see the comment there)
+    active = mi.variant()
+    if active is None:
+        raise RuntimeError(f"{name}: select a Mitsuba variant first (arches_render.backend.set_variant())")
+    key = (impl, base, active)
+    if key not in _BOUND:
+        body = {k: v for k, v in vars(impl).items() if k not in ("__dict__", "__weakref__")}
+        _BOUND[key] = type(name, (getattr(mi, base),), body)
+    return _BOUND[key]

@@ -22,8 +22,8 @@ from __future__ import annotations
 import statistics
 import time
 
+import mitsuba as mi
 import numpy as np
-
 from timing import random_points, timed_eval  # noqa: E402  (benchmarks/ is on sys.path)
 
 STRUCTURES = ("equidimensional", "rhombohedral", "polyhedral", "tabular", "columnar", "prismatic")
@@ -82,7 +82,6 @@ def _terrain():
 
 
 def bench_blocks_field_evals(repeat):
-    import mitsuba as mi
     node, H = _terrain()
     lo, hi = node.bounds()
     n = 1 << 20

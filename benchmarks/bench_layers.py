@@ -24,6 +24,8 @@ import sys
 import time
 from pathlib import Path
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -42,8 +44,7 @@ def cave_terrain(nx, ny, nz, seed=0, relief=None):
     Columns bottom-up: bedrock, [air, bedrock], [air, bedrock], sandstone, sand; built as
     a count matrix and folded where a cave is absent (vectorized, no Python per column).
     """
-    from arches_render.generators.layers.material_stacks import (AIR, BEDROCK, SAND, SANDSTONE,
-                                                                  MaterialStacks)
+    from arches_render.generators.layers.material_stacks import AIR, BEDROCK, SAND, SANDSTONE, MaterialStacks
     H = (0.55 + 0.2 * _smooth_noise((ny, nx), max(nx, ny) / 16, seed)
          + 0.05 * _smooth_noise((ny, nx), max(nx, ny) / 64, seed + 1))
     H = np.clip(H, 0.1, 0.95)
@@ -97,8 +98,6 @@ def bench_layers_memory_bytes(repeat):
 
 
 def bench_layers_field_evals(repeat):
-    import drjit as dr
-    import mitsuba as mi
     from timing import random_points, timed_eval
 
     from arches_render.generators.layers.convolution_surface import ConvolutionSurface

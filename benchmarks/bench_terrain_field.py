@@ -34,6 +34,7 @@ import sys
 import time
 from pathlib import Path
 
+import mitsuba as mi
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -78,7 +79,6 @@ def sea_tree(n_prims=50_000, size=6000.0, res=512, seed=0):
 def _near_surface_points(terrain, n, lo_xy, hi_xy, seed=1, coherent=True):
     """Points within 20 m of the surface; ``coherent``: sorted by 8 m cells, as the
     queries of a polygonizer or of a tile of rays arrive (SIMD lanes see neighbours)."""
-    import mitsuba as mi
     rng = np.random.default_rng(seed)
     xy = rng.uniform(lo_xy, hi_xy, (n, 2))
     z = terrain.elevation_np(xy[:, 0], xy[:, 1]) + rng.uniform(-20.0, 20.0, n)
@@ -91,7 +91,6 @@ def _near_surface_points(terrain, n, lo_xy, hi_xy, seed=1, coherent=True):
 
 
 def bench_terrain_field_evals_50k(repeat):
-    import mitsuba as mi
     from arches_render.backend import variant
     variant()
     t0 = time.perf_counter()

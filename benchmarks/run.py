@@ -34,6 +34,9 @@ import tempfile
 import time
 from pathlib import Path
 
+import arches_render  # noqa: F401  (first: it chooses the libLLVM that Dr.Jit loads)
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
@@ -65,9 +68,6 @@ def bench_field_evals_tree20(repeat):
 
 
 def bench_field_evals_set10k(repeat):
-    import drjit as dr
-    import mitsuba as mi
-
     from arches_render import field as F
     rng = np.random.default_rng(1)
     a = rng.uniform(-100, 100, (10_000, 3)) * [1, 1, 0.1]

@@ -5,13 +5,14 @@ from __future__ import annotations
 import statistics
 import time
 
+import arches_render  # noqa: F401  (first: it chooses the libLLVM that Dr.Jit loads)
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 
 
 def timed_eval(fn, points, repeat):
     """Median seconds of ``fn(points)`` with kernels compiled (one warm-up)."""
-    import drjit as dr
-    import mitsuba as mi
     times = []
     for i in range(repeat + 1):
         # An opaque offset makes each run a new computation of the same kernel.
@@ -27,6 +28,5 @@ def timed_eval(fn, points, repeat):
 
 def random_points(n, lo, hi, seed=0):
     """``n`` uniform random points in the box [lo, hi] as an ``mi.Point3f``."""
-    import mitsuba as mi
     pts = np.random.default_rng(seed).uniform(lo, hi, (n, 3)).astype(np.float32)
     return mi.Point3f(*(mi.Float(pts[:, i]) for i in range(3)))

@@ -41,6 +41,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from ..backend import variant_class
+
 __all__ = ["MAX_LAYERS", "TEXTURE_DIR", "Layer", "triplanar_dict", "triplanar_weights",
            "composite_weights", "texture_path", "register", "TriplanarBSDF"]
 
@@ -566,21 +568,9 @@ class _TriplanarImpl:
                 f"textured={[t is not None for t in self.textures]}]")
 
 
-_CLASSES: dict = {}
-
-
 def _bsdf_class():
     """:class:`TriplanarBSDF` bound to the active variant's ``mi.BSDF``."""
-    variant = mi.variant()
-    if variant is None:
-        raise RuntimeError("triplanar: select a Mitsuba variant first "
-                           "(arches_render.backend.set_variant())")
-    if variant not in _CLASSES:
-        # nanobind types take a single base, so the body is copied in, not mixed in.
-        body = {k: v for k, v in vars(_TriplanarImpl).items()
-                if k not in ("__dict__", "__weakref__")}
-        _CLASSES[variant] = type("TriplanarBSDF", (mi.BSDF,), body)
-    return _CLASSES[variant]
+    return variant_class("TriplanarBSDF", _TriplanarImpl, "BSDF")
 
 
 def __getattr__(name):

@@ -11,9 +11,9 @@ SCENES = REPO / "scenes"
 
 
 def variant():
-    """Select the default variant (and register our plugins) once."""
-    from arches_render import backend
-    return backend.set_variant()
+    """Select the default variant and register our plugins (once)."""
+    from arches_render.render.plugins import ensure_registered
+    return ensure_registered()
 
 
 def random_points(n, lo, hi, seed=0):

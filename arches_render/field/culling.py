@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import copy
 
+import drjit as dr
 import numpy as np
 
 from .node import Node, box_distance, opaque_float
@@ -54,7 +55,6 @@ class Culled(Node):
         return self.children[0].eval(p)
 
     def eval_bounds(self, p, levels, direction=None):
-        import drjit as dr
         dist = box_distance(p, self._lo, self._hi)
 
         def near(p, dist):

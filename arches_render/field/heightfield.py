@@ -38,6 +38,8 @@ and scalable dynamic height field rendering. I3D '08.
 
 from __future__ import annotations
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 
 from .node import Node, opaque_float
@@ -59,7 +61,6 @@ class Heightfield(Node):
     kind = "heightfield"
 
     def __init__(self, heights, extent, base=None):
-        import mitsuba as mi
         H = np.asarray(heights, dtype=np.float64)
         if H.ndim != 2 or min(H.shape) < 2:
             raise ValueError("heights must be a 2-D array of at least 2x2 samples")
@@ -93,8 +94,6 @@ class Heightfield(Node):
 
     def height(self, x, y):
         """Bilinear elevation at ``(x, y)`` (``mi.Float`` each), clamped at the edges."""
-        import drjit as dr
-        import mitsuba as mi
         u = dr.clip((x - self._x0) * self._inv_dx, 0.0, self.nx - 1.0)
         v = dr.clip((y - self._y0) * self._inv_dy, 0.0, self.ny - 1.0)
         i = dr.minimum(mi.UInt32(u), self.nx - 2)
@@ -108,12 +107,9 @@ class Heightfield(Node):
         return dr.lerp(dr.lerp(h00, h10, fu), dr.lerp(h01, h11, fu), fv)
 
     def eval(self, p):
-        import drjit as dr
         return dr.minimum(self.height(p.x, p.y) - p.z, self._box(p))
 
     def _box(self, p):
-        import drjit as dr
-        import mitsuba as mi
         q = mi.Vector3f(dr.abs(p.x - self._bc[0]) - self._bh[0],
                         dr.abs(p.y - self._bc[1]) - self._bh[1],
                         dr.abs(p.z - self._bc[2]) - self._bh[2])
@@ -121,8 +117,6 @@ class Heightfield(Node):
 
     def eval_bounds(self, p, levels, direction=None):
         # An intersection of the ground and the box: as far as the farther one.
-        import drjit as dr
-        import mitsuba as mi
         box = self._box(p)
         top = self.height(p.x, p.y) - p.z
         u = dr.clip((p.x - self._x0) * self._inv_dx, 0.0, self.nx - 1.0)

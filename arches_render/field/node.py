@@ -34,6 +34,8 @@ questions:
 
 from __future__ import annotations
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 
 from ..backend import variant
@@ -42,16 +44,12 @@ from ..backend import variant
 def opaque_float(value):
     """A scalar parameter as an opaque ``mi.Float`` (edited without recompiling)."""
     variant()
-    import drjit as dr
-    import mitsuba as mi
     return dr.opaque(mi.Float, float(value))
 
 
 def opaque_point(value):
     """A 3-vector parameter as an opaque ``mi.Point3f``."""
     variant()
-    import drjit as dr
-    import mitsuba as mi
     v = [float(x) for x in np.asarray(value, dtype=np.float64).reshape(3)]
     return mi.Point3f(*(dr.opaque(mi.Float, x) for x in v))
 
@@ -68,6 +66,12 @@ class Node:
     kind = "node"
 
     children: tuple = ()
+
+    def __new__(cls, *args, **kwargs):
+        # A node holds Dr.Jit arrays of the active variant: building one selects
+        # the default variant on first use (a leaf: no plugin is registered).
+        variant()
+        return super().__new__(cls)
 
     def eval(self, p):
         """Field value at the points ``p`` (``mi.Point3f``) as ``mi.Float``."""
@@ -122,7 +126,6 @@ class Node:
 
 def hart_bounds(f, levels, lipschitz):
     """Hart's bounds ``max(-f - c, 0) / L`` for each level ``c``."""
-    import drjit as dr
     inv = 1.0 / lipschitz
     return tuple(dr.maximum(-f - c, 0.0) * inv for c in levels)
 
@@ -130,8 +133,6 @@ def hart_bounds(f, levels, lipschitz):
 def box_distance(p, lo, hi):
     """Euclidean distance from ``p`` to the box ``[lo, hi]`` (0 inside); ``lo``, ``hi``
     are sequences of three ``mi.Float`` (opaque parameters)."""
-    import drjit as dr
-    import mitsuba as mi
     return dr.norm(mi.Vector3f(*(dr.maximum(dr.maximum(lo[i] - p[i], p[i] - hi[i]), 0.0)
                                  for i in range(3))))
 
@@ -166,8 +167,6 @@ def evaluate(node: Node, points: np.ndarray, batch: int = 1 << 20) -> np.ndarray
         ``(N,)`` float32 field values.
     """
     variant()
-    import drjit as dr
-    import mitsuba as mi
     pts = np.ascontiguousarray(points, dtype=np.float32).reshape(-1, 3)
     out = np.empty(len(pts), dtype=np.float32)
     for s in range(0, len(pts), batch):
@@ -203,7 +202,6 @@ def gradient(node: Node, p, h: float | None = None, culled: bool = False):
     mi.Vector3f
         Unnormalized gradient (points *into* matter, since f > 0 inside).
     """
-    import mitsuba as mi
     h = 1e-3 if h is None else h
     g = mi.Vector3f(0.0)
     for k in ((1, -1, -1), (-1, -1, 1), (-1, 1, -1), (1, 1, 1)):

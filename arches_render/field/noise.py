@@ -41,6 +41,8 @@ eroded fractal terrains. SIGGRAPH '89, 41-50.
 
 from __future__ import annotations
 
+import drjit as dr
+import mitsuba as mi
 
 # Certified by arches_render/field/noise_bound.py (python -m arches_render.field.noise_bound):
 # sup |grad n| <= 3.7580 = max over adaptive cubes of [net max of Phi / cos(delta) + V(cube)],
@@ -64,7 +66,6 @@ def _corner_hash(hx, hy, hz):
 
 def _grad_dot(h, x, y, z):
     """``g . (x, y, z)`` for the improved-noise gradient picked by the hash ``h``."""
-    import drjit as dr
     b = h
     u = dr.select(b < 8, x, y)
     v = dr.select(b < 4, y, dr.select((b == 12) | (b == 14), x, z))
@@ -83,8 +84,6 @@ def gradient_noise(p, seed):
     mi.Float
         Values in ``[-NOISE_RANGE, NOISE_RANGE]``, Lipschitz ``NOISE_LIPSCHITZ``.
     """
-    import drjit as dr
-    import mitsuba as mi
     fl = dr.floor(p)
     i = mi.Vector3i(fl)
     u = p - fl
@@ -123,7 +122,6 @@ def fbm(p, octaves: int, lacunarity, gain, seed):
     -------
     mi.Float
     """
-    import mitsuba as mi
     total = mi.Float(0.0)
     amp = mi.Float(1.0)
     q = mi.Point3f(p)

@@ -36,6 +36,7 @@ Journal, 16(2), 157-160.
 
 from __future__ import annotations
 
+import drjit as dr
 import numpy as np
 
 from .node import Node, box_intersection, box_union, hart_bounds, opaque_float
@@ -43,7 +44,6 @@ from .node import Node, box_intersection, box_union, hart_bounds, opaque_float
 
 def smooth_max(a, b, k):
     """Polynomial smooth maximum of radius ``k`` (see module docstring)."""
-    import drjit as dr
     h = dr.maximum(k - dr.abs(a - b), 0.0) / k
     return dr.maximum(a, b) + h * h * k * 0.25
 
@@ -83,12 +83,10 @@ class Union(_Lattice):
 
     @staticmethod
     def _value(a, b):
-        import drjit as dr
         return dr.maximum(a, b)
 
     @staticmethod
     def _distance(a, b):
-        import drjit as dr
         return dr.minimum(a, b)
 
     def bounds(self):
@@ -121,14 +119,12 @@ class Difference(_NAry):
         super().__init__(*children)
 
     def eval(self, p):
-        import drjit as dr
         v = self.children[0].eval(p)
         for c in self.children[1:]:
             v = dr.minimum(v, -c.eval(p))
         return v
 
     def eval_bounds(self, p, levels, direction=None):
-        import drjit as dr
         f, ds = self.children[0].eval_bounds(p, levels, direction)
         for c in self.children[1:]:
             fc = c.eval(p)
@@ -160,7 +156,6 @@ class Blend(_NAry):
         return v
 
     def eval_bounds(self, p, levels, direction=None):
-        import drjit as dr
         m = len(levels)
         seam = self.radius * ((len(self.children) + 3) * 0.25)
         asked = tuple(levels) + tuple(c + seam for c in levels)
@@ -204,7 +199,6 @@ class SmoothIntersection(_NAry):
 
     def eval_bounds(self, p, levels, direction=None):
         # -smax(-a, -b) >= -c implies min(a, b) >= -c: inside both operands' sets.
-        import drjit as dr
         v, ds = self.children[0].eval_bounds(p, levels, direction)
         for c in self.children[1:]:
             fc, dc = c.eval_bounds(p, levels, direction)

@@ -34,6 +34,8 @@ Paris, A. et al. (2019). Terrain amplification with implicit 3D features. ACM TO
 
 from __future__ import annotations
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 
 from .node import Node, box_distance, opaque_float
@@ -92,7 +94,6 @@ class CapsuleSet(Node):
     kind = "capsule_set"
 
     def __init__(self, a, b, radius, cell_size=None, margin=None, max_cells=64 ** 3):
-        import mitsuba as mi
         a = np.asarray(a, dtype=np.float64).reshape(-1, 3)
         b = np.asarray(b, dtype=np.float64).reshape(-1, 3)
         r = np.broadcast_to(np.asarray(radius, dtype=np.float64), (len(a),)).copy()
@@ -132,8 +133,6 @@ class CapsuleSet(Node):
         self.a_np, self.b_np, self.r_np = a, b, r
 
     def _cell(self, p):
-        import drjit as dr
-        import mitsuba as mi
         rx, ry, rz = (int(v) for v in self.res)
         ix = mi.UInt32(dr.clip((p.x - self._glo[0]) * self._inv_cell, 0.0, rx - 1.0))
         iy = mi.UInt32(dr.clip((p.y - self._glo[1]) * self._inv_cell, 0.0, ry - 1.0))
@@ -141,15 +140,11 @@ class CapsuleSet(Node):
         return (iz * ry + iy) * rx + ix
 
     def eval_bounds(self, p, levels, direction=None):
-        import drjit as dr
-        import mitsuba as mi
         f = self.eval(p)
         empty = dr.gather(mi.Float, self._empty, self._cell(p))
         return f, tuple(dr.maximum(dr.maximum(-f - c, 0.0), empty - c) for c in levels)
 
     def eval(self, p):
-        import drjit as dr
-        import mitsuba as mi
         cell = self._cell(p)
         start = dr.gather(mi.UInt32, self._start, cell)
         count = dr.gather(mi.UInt32, self._count, cell)

@@ -11,6 +11,7 @@ tracing of implicit surfaces. The Visual Computer, 12(10), 527-545.
 
 from __future__ import annotations
 
+import drjit as dr
 import numpy as np
 
 from .node import Node, opaque_float, opaque_point
@@ -30,7 +31,6 @@ class Sphere(Node):
         self.r = opaque_float(self.r_np)
 
     def eval(self, p):
-        import drjit as dr
         return self.r - dr.norm(p - self.c)
 
     def bounds(self):
@@ -59,7 +59,6 @@ class Box(Node):
         self.rounding = opaque_float(self.round_np)
 
     def eval(self, p):
-        import drjit as dr
         q = dr.abs(p - self.c) - self.h
         outside = dr.norm(dr.maximum(q, 0.0))
         inside = dr.minimum(dr.maximum(dr.maximum(q.x, q.y), q.z), 0.0)
@@ -87,7 +86,6 @@ class Capsule(Node):
         self.r = opaque_float(self.r_np)
 
     def eval(self, p):
-        import drjit as dr
         pa, ba = p - self.a, self.b - self.a
         t = dr.clip(dr.dot(pa, ba) / dr.maximum(dr.squared_norm(ba), 1e-20), 0.0, 1.0)
         return self.r - dr.norm(pa - ba * t)
@@ -122,7 +120,6 @@ class Plane(Node):
         self.o = opaque_point(self.o_np)
 
     def eval(self, p):
-        import drjit as dr
         return dr.dot(self.n, self.o - p)
 
     def bounds(self):

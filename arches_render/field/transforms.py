@@ -9,6 +9,7 @@ keeps the Lipschitz bound of the child for any invertible ``M``:
 
 from __future__ import annotations
 
+import mitsuba as mi
 import numpy as np
 
 from .node import Node, opaque_float
@@ -65,7 +66,6 @@ class Transform(Node):
         return cls(child, S, c - S @ c)
 
     def _local(self, p):
-        import mitsuba as mi
         q = [p.x - self._t[0], p.y - self._t[1], p.z - self._t[2]]
         m = self._minv
         return mi.Point3f(*(m[i][0] * q[0] + m[i][1] * q[1] + m[i][2] * q[2] for i in range(3)))

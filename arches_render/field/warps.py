@@ -25,6 +25,8 @@ from __future__ import annotations
 
 import math
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 
 from .node import Node, hart_bounds, opaque_float
@@ -38,8 +40,6 @@ class _FbmParams:
     noise_fields = 1
 
     def _init_fbm(self, amplitude, wavelength, octaves, lacunarity, gain, seed):
-        import drjit as dr
-        import mitsuba as mi
         if not wavelength > 0:
             raise ValueError("wavelength must be > 0")
         if not 1 <= int(octaves) <= 16:
@@ -115,7 +115,6 @@ class Displace(_FbmParams, Node):
 
     def eval_bounds(self, p, levels, direction=None):
         # {f >= -c} lies inside {f_child >= -c - max_offset}.
-        import drjit as dr
         fc, dc = self.children[0].eval_bounds(p, tuple(c + self.max_offset for c in levels), direction)
         if self.skip_margin is None:
             f = fc + self.amplitude * self._fbm(p)
@@ -146,7 +145,6 @@ class DomainWarp(_FbmParams, Node):
         self._init_fbm(amplitude, wavelength, octaves, lacunarity, gain, seed)
 
     def eval(self, p):
-        import mitsuba as mi
         w = mi.Vector3f(self._fbm(p, 0), self._fbm(p, 1), self._fbm(p, 2))
         return self.children[0].eval(p + self.amplitude * w)
 

@@ -58,6 +58,8 @@ from typing import Sequence
 
 import numpy as np
 
+from .preview import encode_srgb
+
 __all__ = [
     "LUMINANCE_WEIGHTS", "Thresholds", "CompareResult", "CalibrationWarning",
     "luminance", "window_error", "mean_shift", "flip_error", "compare", "calibrate",
@@ -347,7 +349,6 @@ def flip_error(ref, test) -> tuple[np.ndarray, float]:
     """
     import flip_evaluator
 
-    from .preview import encode_srgb
 
     r = np.ascontiguousarray(encode_srgb(ref), dtype=np.float32)
     t = np.ascontiguousarray(encode_srgb(test), dtype=np.float32)

@@ -23,8 +23,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 
+from ..backend import variant
+from ..imaging.preview import to_srgb8
+from ..mesh.polygonize import default_voxel, field_normals
 from .uv_atlas import UVMesh
 
 __all__ = ["BakedTextures", "rasterize_uv", "bake_material"]
@@ -117,12 +122,8 @@ def bake_material(mesh: UVMesh, bsdf, field=None) -> BakedTextures:
     ----------
     See the module docstring.
     """
-    from ..backend import variant
     variant()
-    import drjit as dr
-    import mitsuba as mi
 
-    from ..imaging.preview import to_srgb8
     tri, bary = rasterize_uv(mesh)
     covered = tri >= 0
     idx = tri[covered]
@@ -130,7 +131,6 @@ def bake_material(mesh: UVMesh, bsdf, field=None) -> BakedTextures:
     faces = mesh.faces.astype(np.int64)[idx]
     p = np.einsum("nk,nkd->nd", lam, mesh.vertices.astype(np.float64)[faces])
     if field is not None:
-        from ..mesh.polygonize import default_voxel, field_normals
         n = field_normals(field, p, 0.05 * default_voxel(field)).astype(np.float64)
     else:
         n = np.einsum("nk,nkd->nd", lam, mesh.normals.astype(np.float64)[faces])

@@ -56,8 +56,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 
+from ..backend import variant
 from ..field import Node, evaluate
 from ..field.heightfield import Heightfield
 from ..field.operators import Difference, Intersection, Union
@@ -159,10 +162,7 @@ class _Grid:
 
 def _elevation(node, X, Y):
     """Elevation of a terrain node at numpy columns, through its own Dr.Jit code."""
-    from ..backend import variant
     variant()
-    import drjit as dr
-    import mitsuba as mi
     x = mi.Float(X.astype(np.float32).ravel())
     y = mi.Float(Y.astype(np.float32).ravel())
     h = node.elevation(x, y) if hasattr(node, "elevation") else node.height(x, y)

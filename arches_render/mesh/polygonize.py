@@ -22,8 +22,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 
+from ..atomic import atomic_write
+from ..backend import variant
 from ..field import Node, evaluate
 
 
@@ -64,10 +68,6 @@ MAX_VOXELS = 400_000_000
 
 def _classify_blocks(node: Node, lo, voxel, nblocks):
     """Per block: 0 = may hold surface, -1 = certainly air, +1 = certainly matter."""
-    import drjit as dr
-    import mitsuba as mi
-
-    from ..backend import variant
     variant()
     idx = np.stack(np.meshgrid(*(np.arange(n) for n in nblocks), indexing="ij"), -1).reshape(-1, 3)
     centres = lo + (idx * BLOCK + (BLOCK - 1) / 2.0) * voxel
@@ -162,7 +162,6 @@ def export_mesh(mesh: TriangleMesh, path) -> None:
     """Write a mesh as PLY, OBJ or GLB (format from the extension), atomically."""
     from pathlib import Path
 
-    from ..atomic import atomic_write
     path = Path(path)
     fmt = path.suffix.lower().lstrip(".")
     if fmt not in ("ply", "obj", "glb"):

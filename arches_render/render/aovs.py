@@ -31,6 +31,8 @@ Kainz, F. et al. "Technical Introduction to OpenEXR" (layer.channel naming).
 
 from __future__ import annotations
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 
 __all__ = ["BASE_LAYERS", "aov_channel_names", "primary_aovs", "split_channels", "layer_names_of"]
@@ -85,8 +87,6 @@ def primary_aovs(si, field_hit, valid, bsdf, field_bsdf=None, depth=None) -> lis
     -------
     list of mi.Float
     """
-    import drjit as dr
-    import mitsuba as mi
     zero = mi.Float(0.0)
     albedo = dr.select(valid, mi.Color3f(bsdf.eval_diffuse_reflectance(si, valid)), mi.Color3f(0.0))
     n = dr.select(valid, si.sh_frame.n, mi.Vector3f(0.0))

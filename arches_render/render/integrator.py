@@ -17,7 +17,9 @@ heuristic between emitter and BSDF sampling, and Russian roulette from depth
 
 Python cannot subclass ``mi.Shape`` (only meshes), so the field travels next to
 the scene: :meth:`ImplicitPathIntegrator.attach` gives it to the integrator after
-``mi.load_dict``.
+``mi.load_dict``. ``mi.SamplingIntegrator`` exists per variant, so the class is
+bound to the variant chosen at run time (:func:`arches_render.backend.variant_class`),
+as the ``triplanar`` BSDF is; this module imports without a variant.
 
 With ``aovs = true`` the integrator also returns the arbitrary output variables of
 the primary hit (:mod:`arches_render.render.aovs`): albedo, shading normal, depth,
@@ -39,7 +41,11 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
+from ..backend import variant_class
+from .aovs import aov_channel_names, primary_aovs
 from .sphere_tracer import SphereTracer
+
+__all__ = ["ImplicitPathIntegrator", "mis_weight", "register"]
 
 
 def mis_weight(pdf_a, pdf_b):
@@ -48,8 +54,11 @@ def mis_weight(pdf_a, pdf_b):
     return dr.detach(dr.select(pdf_a > 0, a2 / dr.fma(pdf_b, pdf_b, a2), 0.0))
 
 
-class ImplicitPathIntegrator(mi.SamplingIntegrator):
+class _ImplicitPathImpl:
     """Path tracer for scenes holding meshes and one implicit field (see module doc).
+
+    The body of :class:`ImplicitPathIntegrator`, a ``mi.SamplingIntegrator`` of the
+    active variant (:func:`integrator_class`).
 
     Properties: ``max_depth`` (default 6, -1 = unbounded), ``rr_depth`` (5),
     ``hide_emitters`` (false), ``eps`` (relative hit tolerance, 2e-4), ``omega``
@@ -58,7 +67,7 @@ class ImplicitPathIntegrator(mi.SamplingIntegrator):
     """
 
     def __init__(self, props):
-        super().__init__(props)
+        mi.SamplingIntegrator.__init__(self, props)
         max_depth = props.get("max_depth", 6)
         self.max_depth = 0xFFFFFFFF if max_depth == -1 else int(max_depth)
         self.rr_depth = int(props.get("rr_depth", 5))
@@ -185,7 +194,6 @@ class ImplicitPathIntegrator(mi.SamplingIntegrator):
 
     def primary_aovs(self, scene, ray, active):
         """AOV values of the primary hit, in the order of :meth:`aov_names`."""
-        from .aovs import primary_aovs
         si, field_hit = self.intersect(scene, ray, active)
         valid = mi.Bool(active) & si.is_valid()
         bsdf = self.bsdf_at(si, ray, field_hit)
@@ -198,7 +206,6 @@ class ImplicitPathIntegrator(mi.SamplingIntegrator):
     def aov_names(self):
         if not self.aovs:
             return []
-        from .aovs import aov_channel_names
         return aov_channel_names(self.field_bsdf if self.tracer else None)
 
     def to_string(self):
@@ -206,6 +213,19 @@ class ImplicitPathIntegrator(mi.SamplingIntegrator):
                 f"field={'attached' if self.tracer else 'none'}]")
 
 
+def integrator_class():
+    """:class:`ImplicitPathIntegrator` bound to the active variant's ``mi.SamplingIntegrator``."""
+    return variant_class("ImplicitPathIntegrator", _ImplicitPathImpl, "SamplingIntegrator")
+
+
+def __getattr__(name):
+    # ``ImplicitPathIntegrator`` depends on the variant chosen at run time, hence lazy.
+    if name == "ImplicitPathIntegrator":
+        return integrator_class()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 def register() -> None:
-    """Register ``implicit_path`` with Mitsuba (idempotent)."""
-    mi.register_integrator("implicit_path", lambda props: ImplicitPathIntegrator(props))
+    """Register ``implicit_path`` with Mitsuba for the active variant (idempotent)."""
+    cls = integrator_class()
+    mi.register_integrator("implicit_path", lambda props: cls(props))

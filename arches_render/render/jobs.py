@@ -18,7 +18,13 @@ from collections import OrderedDict
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
+
+from ..backend import set_variant
+from ..scene import load_scene
+from .renderer import build_scene, render_layers
 
 __all__ = ["RenderJob", "run_job", "clear_cache"]
 
@@ -80,8 +86,6 @@ def clear_cache() -> None:
 
 
 def _scene_for(job: RenderJob):
-    from ..scene import load_scene
-    from .renderer import build_scene
     key = _key(job)
     path = Path(job.scene).resolve()
     if key in _CACHE:
@@ -109,7 +113,6 @@ def _key(job: RenderJob) -> tuple:
 
 def set_camera(scene, origin, target, up, fov) -> None:
     """Move a built scene's camera (a parameter edit: no kernel is recompiled)."""
-    import mitsuba as mi
     params = mi.traverse(scene)
     params["sensor.to_world"] = mi.AffineTransform4f(
         mi.ScalarTransform4f().look_at(origin=[float(v) for v in origin],
@@ -133,12 +136,9 @@ def run_job(job: RenderJob, progress=None):
         Beauty ``(h, w, 3)`` float32 and the AOV layers ``{name: (array, letters)}``
         (see :func:`arches_render.render.renderer.render_layers`).
     """
-    from ..backend import set_variant
     set_variant()
     if job.threads:
-        import drjit as dr
         dr.set_thread_count(int(job.threads))
-    from .renderer import render_layers
     desc, scene = _scene_for(job)
     cam = job.camera or (desc.camera.origin, desc.camera.target, desc.camera.up, desc.camera.fov)
     set_camera(scene, *cam)

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
+from ..imaging.exr import ExrError, read_exr, write_exr
 
 __all__ = ["render_header", "write_render", "is_complete", "IDENTITY_KEYS"]
 
@@ -81,7 +82,6 @@ def write_render(path, rgb, layers=None, header=None, denoised=None) -> Path:
     -------
     pathlib.Path
     """
-    from ..imaging.exr import write_exr
     layers = dict(layers or {})
     if denoised is not None:
         layers["denoised"] = (np.asarray(denoised, np.float32), ("R", "G", "B"))
@@ -107,7 +107,6 @@ def is_complete(path, header: dict, layers=()) -> bool:
         False for a missing, truncated or corrupt file, another render, or a
         file lacking a layer or holding non-finite beauty.
     """
-    from ..imaging.exr import ExrError, read_exr
     path = Path(path)
     if not path.is_file():
         return False

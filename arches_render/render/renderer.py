@@ -14,9 +14,14 @@ bitwise reproducible for a given scene, seed and spp.
 from __future__ import annotations
 
 import math
+
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 
-from ..backend import variant
+from ..mesh.polygonize import polygonize
+from .aovs import split_channels
+from .plugins import ensure_registered
 
 PASS_SPP = 16
 MAX_PASSES = 4096
@@ -24,7 +29,6 @@ MAX_PASSES = 4096
 
 def sensor_dict(desc, width, height, crop=None) -> dict:
     """Perspective camera of the scene; ``crop = (x0, y0, w, h)`` renders a window only."""
-    import mitsuba as mi
     cam = desc.camera
     film = {"type": "hdrfilm", "width": int(width), "height": int(height),
             "pixel_format": "rgb", "rfilter": {"type": "box"}}
@@ -45,10 +49,6 @@ def sensor_dict(desc, width, height, crop=None) -> dict:
 
 def field_mesh_shape(desc, bsdf, voxel=None, progress=None):
     """A Mitsuba mesh of the field's marching-cubes surface, shaded by ``bsdf``."""
-    import drjit as dr
-    import mitsuba as mi
-
-    from ..mesh.polygonize import polygonize
     tri = polygonize(desc.field, voxel or desc.render.voxel or None, progress)
     props = mi.Properties()
     props["bsdf"] = bsdf
@@ -68,7 +68,7 @@ def load_materials(desc) -> dict:
     Objects rather than dictionaries: a mask is a field node, which cannot travel
     through ``mi.load_dict``; meshes and the field then share the same BSDF.
     """
-    import mitsuba as mi
+    ensure_registered()
     bsdfs = {}
     for name, mat in desc.materials.items():
         bsdfs[name] = mi.load_dict(mat)
@@ -106,8 +106,7 @@ def build_scene(desc, geometry=None, width=None, height=None, voxel=None, progre
     -------
     mi.Scene
     """
-    variant()
-    import mitsuba as mi
+    ensure_registered()
     s = desc.render
     geometry = geometry or s.geometry
     d = {"type": "scene",
@@ -175,9 +174,6 @@ def render_layers(scene, spp: int, seed: int = 0, passes: int = 0, progress=None
         ``(H, W, 3)`` float32 beauty and ``{layer: (array, channel letters)}``
         (see :func:`arches_render.render.aovs.split_channels`).
     """
-    import mitsuba as mi
-
-    from .aovs import split_channels
     names = list(scene.integrator().aov_names())
     acc, done = None, 0
     for i, n in enumerate(plan_passes(spp, passes)):
@@ -209,7 +205,6 @@ def render_image(scene, spp: int, seed: int = 0, passes: int = 0, progress=None)
     numpy.ndarray
         ``(H, W, 3)`` float32 linear Rec.709 radiance.
     """
-    import mitsuba as mi
     plan = plan_passes(spp, passes)
     acc = None
     done = 0

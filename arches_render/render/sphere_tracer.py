@@ -23,14 +23,17 @@ sphere tracing. STAG 2014, 1-8.
 
 from __future__ import annotations
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
+
+from ..field import gradient
+from ..field.culling import with_culling
 
 
 def ray_box(o, d, lo, hi):
     """Slab test: entry and exit distances of the ray ``o + t d`` through ``[lo, hi]``
     (``lo``, ``hi``: three floats or three ``mi.Float``)."""
-    import drjit as dr
-    import mitsuba as mi
     inv = dr.rcp(d)
     t0 = (mi.Vector3f(*lo) - o) * inv
     t1 = (mi.Vector3f(*hi) - o) * inv
@@ -55,15 +58,12 @@ class SphereTracer:
     """
 
     def __init__(self, field, eps=2e-4, omega=1.6, max_steps=512):
-        import drjit as dr
-        import mitsuba as mi
         lo, hi = field.bounds()
         if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
             raise ValueError("the field is unbounded: intersect it with a box")
         pad = 1e-3 * float(np.max(hi - lo)) + 1e-4
         self.lo, self.hi = [float(v) - pad for v in lo], [float(v) + pad for v in hi]
         self.scale = float(np.linalg.norm(np.asarray(self.hi) - np.asarray(self.lo)))
-        from ..field.culling import with_culling
         # Culling must keep values exact wherever the tracer looks closely: hits
         # (|f| < eps t) and gradient taps (h <= eps t / 2 away, so |f| grows by at
         # most L sqrt(3) h); t is bounded by the box's diagonal.
@@ -85,8 +85,6 @@ class SphereTracer:
         (mi.Bool, mi.Float)
             Hit mask and distance.
         """
-        import drjit as dr
-        import mitsuba as mi
         t_in, t_out = ray_box(o, d, self.lo_op, self.hi_op)
         t_start = dr.maximum(t_in, 0.0)
         t_end = dr.minimum(t_out, tmax)
@@ -139,8 +137,6 @@ class SphereTracer:
             deep in an implicit heightfield whose value is constant there) the
             normal faces the ray, ``-d`` (or +Z without ``d``), instead of NaN.
         """
-        import drjit as dr
-        from ..field import gradient
         h = dr.maximum(1e-5 * self.scale_op, 0.5 * self.eps * t)
         g = gradient(self.field, p, h, culled=True)
         f = self.field.eval_bounds(p, ())[0]
@@ -148,7 +144,6 @@ class SphereTracer:
         step = dr.select(g2 > 0.0, f / g2, 0.0)
         # Never move farther than the tolerance that stopped the ray.
         step = dr.clip(step * dr.sqrt(g2), -self.eps * t, self.eps * t) * dr.rsqrt(dr.maximum(g2, 1e-30))
-        import mitsuba as mi
         fallback = -d if d is not None else mi.Vector3f(0.0, 0.0, 1.0)
         n = dr.select(g2 > 1e-30, -g * dr.rsqrt(dr.maximum(g2, 1e-30)), fallback)
         return p - g * step, n

@@ -31,7 +31,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .jobs import RenderJob
+from .aovs import BASE_LAYERS
+from .distributed import map_jobs
+from .jobs import RenderJob, run_job
 from .output import is_complete, render_header, write_render
 
 __all__ = ["FIRST_FRAME", "orbit_camera", "frame_path", "TurntablePlan", "plan_turntable",
@@ -113,7 +115,6 @@ def plan_turntable(desc, scene_file, out_dir, frames: int, spp: int, width: int,
     cam = desc.camera
     seed = desc.render.seed if seed is None else int(seed)
     jobs, paths, headers, todo = [], [], [], []
-    from .aovs import BASE_LAYERS
     layers = tuple(name for name, _ in BASE_LAYERS) if aovs else ()
     if denoise:
         layers += ("denoised",)
@@ -168,13 +169,11 @@ def render_turntable(plan: TurntablePlan, denoise: bool = False, client=None, pr
     if progress:
         progress(0, len(plan.todo))
     if client is None:
-        from .jobs import run_job
         for k in plan.todo:
             written.append(_write_frame(plan, k, run_job(plan.jobs[k], sample_progress), denoise))
             if progress:
                 progress(len(written), len(plan.todo))
         return written
-    from .distributed import map_jobs
     for k, result in map_jobs(client, [plan.jobs[k] for k in plan.todo], keys=plan.todo):
         written.append(_write_frame(plan, k, result, denoise))
         if progress:

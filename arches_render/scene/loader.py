@@ -40,6 +40,8 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
+import mitsuba as mi
+
 from .errors import SceneError
 from .nodes import NodeBuilder
 from .validate import Table
@@ -121,7 +123,6 @@ def _light(t: Table, base_dir: Path) -> dict:
     elif kind == "constant":
         d = {"type": "constant", "radiance": _rgb(t, "radiance", 1.0)}
     else:
-        import mitsuba as mi
         path = base_dir / t.string("file")
         if not path.is_file():
             raise t.error("file", f"no such file: {path}")
@@ -163,7 +164,6 @@ def _material(t: Table, builder) -> tuple[dict, list]:
 
 
 def _mesh(t: Table, base_dir: Path, materials: dict) -> dict:
-    import mitsuba as mi
     if t.has("file"):
         path = base_dir / t.string("file")
         if path.suffix.lower() not in (".ply", ".obj"):

@@ -78,10 +78,12 @@ Stolte, N. (2002). Infinite implicit replication. Shape Modeling International.
 
 from __future__ import annotations
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 
 from arches_render.field.node import Node, box_distance, opaque_float
-from arches_render.field.noise import fbm_lipschitz, fbm_range
+from arches_render.field.noise import _corner_hash, _fade, _grad_dot, fbm_lipschitz, fbm_range
 from arches_render.field.operators import smooth_max
 
 from .block_hulls import offset_box
@@ -100,9 +102,6 @@ def planar_noise(x, y, seed):
     have ``u_z = 0``, so only the four corners ``c_z = 0`` are summed (half the
     work). Its Lipschitz bound and range are those of the 3D noise.
     """
-    import drjit as dr
-    import mitsuba as mi
-    from arches_render.field.noise import _corner_hash, _fade, _grad_dot
     fx, fy = dr.floor(x), dr.floor(y)
     ix, iy = mi.UInt32(mi.Int32(fx)), mi.UInt32(mi.Int32(fy))
     ux, uy = x - fx, y - fy
@@ -124,7 +123,6 @@ def planar_fbm(x, y, octaves, seed):
     """fBm of :func:`planar_noise` (lacunarity 2, gain 1/2, per-octave offsets in the
     plane): Lipschitz ``fbm_lipschitz(octaves, 2, 1/2)``, range ``fbm_range(octaves, 1/2)``
     (each octave is a restriction of the 3D noise to a plane)."""
-    import mitsuba as mi
     total = mi.Float(0.0)
     for k in range(int(octaves)):
         f = float(2 ** k)
@@ -195,8 +193,6 @@ class BlockField(Node):
 
     def __init__(self, tile, smoothness=0.25, warp=0.0, warp_wavelength=1.0, warp_octaves=2,
                  seed=0, presence=None, tiles_lo=(0, 0, 0), margin=0.25, cell_size=None):
-        import drjit as dr
-        import mitsuba as mi
         if not smoothness > 0:
             raise ValueError(f"smoothness must be > 0 (got {smoothness})")
         if not warp >= 0 or not warp_wavelength > 0:
@@ -257,7 +253,6 @@ class BlockField(Node):
 
     # -- presence and the world grid -------------------------------------------------
     def _setup_presence(self, presence, tiles_lo, blo, bhi):
-        import mitsuba as mi
         self.presence_np = None
         self.world_lo = None
         if presence is None:
@@ -313,8 +308,6 @@ class BlockField(Node):
         self._winv = opaque_float(1.0 / cw)
 
     def _world_cell(self, p):
-        import drjit as dr
-        import mitsuba as mi
         rx, ry, rz = (int(v) for v in self.world_res)
         ix = mi.UInt32(dr.clip((p.x - self._wlo[0]) * self._winv, 0.0, rx - 1.0))
         iy = mi.UInt32(dr.clip((p.y - self._wlo[1]) * self._winv, 0.0, ry - 1.0))
@@ -332,8 +325,6 @@ class BlockField(Node):
     def _fold(self, b, x, present, best, det):
         """``(max(best, b_b(x)), v)`` where present; the plane fold stops once below
         ``best``, so ``v >= b_b(x)`` is the value or an upper bound of it."""
-        import drjit as dr
-        import mitsuba as mi
         k0 = dr.gather(mi.UInt32, self._pstart, b)
         k1 = dr.select(present, k0 + dr.gather(mi.UInt32, self._pcount, b), k0)
         # The first six planes of a block are its box faces +x, +y, +z, -x, -y, -z
@@ -362,8 +353,6 @@ class BlockField(Node):
 
     def _tiled(self, p):
         """``t`` by the mod-tiling, every block present (tile-local lists)."""
-        import drjit as dr
-        import mitsuba as mi
         T = dr.floor(p * self._inv_s)
         q = p - T * self._s
         res = self.res_t
@@ -388,8 +377,6 @@ class BlockField(Node):
 
     def _present(self, p, cell):
         """``t`` over the present copies listed in the world cell of ``p``."""
-        import drjit as dr
-        import mitsuba as mi
         start = dr.gather(mi.UInt32, self._wstart, cell)
         count = dr.gather(mi.UInt32, self._wcount, cell)
         det = self._detail(p) if self.warp_np > 0 else None
@@ -412,8 +399,6 @@ class BlockField(Node):
     def _eval(self, p):
         """``(t, extra)``; ``extra`` = (empty-space distance, upper bound of the listed
         copies, distance to the world cell's faces) for :meth:`eval_bounds`."""
-        import drjit as dr
-        import mitsuba as mi
         if self.presence_np is None:
             return self._tiled(p), None
         if self.world_lo is None:
@@ -436,7 +421,6 @@ class BlockField(Node):
         the empty-space distance and ``min(-v_max / L, m - c + face)``, where ``v_max``
         bounds the listed copies and ``face`` is the distance to the world cell's
         faces (an unlisted copy's solid, grown by ``m``, lies outside the cell)."""
-        import drjit as dr
         f, extra = self._eval(p)
         inv = 1.0 / self.lipschitz
         out = []

@@ -16,6 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from arches_render.atomic import atomic_path, atomic_write
+
 from .geometry import face_triangles, oriented_faces
 from .gmap import GMap
 
@@ -52,7 +54,6 @@ def write_ply_folder(g: GMap, folder, materials: dict | None = None, meta: dict 
     The manifest lists ``{"file", "label", "material", "faces", "watertight"}``
     per volume, plus ``meta``.
     """
-    from arches_render.atomic import atomic_path, atomic_write
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     entries, paths = [], []
@@ -73,7 +74,6 @@ def write_ply_folder(g: GMap, folder, materials: dict | None = None, meta: dict 
 def write_gltf(g: GMap, path, materials: dict | None = None) -> Path:
     """Write all volumes to one ``.glb``/``.gltf`` scene, a PBR material per volume."""
     import trimesh
-    from arches_render.atomic import atomic_path
     path = Path(path)
     scene = trimesh.Scene()
     for label, part, mat, mesh in volume_meshes(g, materials):

@@ -55,9 +55,12 @@ from __future__ import annotations
 
 import math
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 from numba import njit
 
+from arches_render.backend import variant
 from arches_render.field.node import Node, hart_bounds, opaque_float
 
 from .material_stacks import SOLID, MaterialStacks
@@ -94,7 +97,6 @@ class _ColumnSums:
     INLINE = 3
 
     def __init__(self, stacks: MaterialStacks, materials, sigma: float):
-        import mitsuba as mi
         off, bot, top, below = _prefix_arrays(stacks, materials)
         counts = np.diff(off)
         self.n_max = int(counts.max()) if len(counts) else 0
@@ -136,8 +138,6 @@ class _ColumnSums:
 
     def column_length(self, c, z_lo, z_hi, ok):
         """Occupied length of column ``c`` inside ``[z_lo, z_hi]``."""
-        import drjit as dr
-        import mitsuba as mi
         total = mi.Float(0.0)
         base = c * self.stride
         for k in range(self.n_inline):
@@ -153,8 +153,6 @@ class _ColumnSums:
 
     def occupied_below(self, start, end, z, active):
         """``C(z)``: occupied length of the overflow intervals ``[start, end)`` below ``z``."""
-        import drjit as dr
-        import mitsuba as mi
         lo, hi = mi.UInt32(start), mi.UInt32(end)
         for _ in range(self.steps):
             open_ = active & (lo < hi)
@@ -175,8 +173,6 @@ class _Footprint:
     """Columns under the kernel cube and their overlap lengths (in cells)."""
 
     def __init__(self, node, p):
-        import drjit as dr
-        import mitsuba as mi
         u = (p.x - node._x0) * node._inv_s
         v = (p.y - node._y0) * node._inv_s
         r = node._r
@@ -196,8 +192,6 @@ class _Footprint:
 
     def integral(self, node, sums: _ColumnSums, z_lo, z_hi):
         """``sum w_x w_y (C(z_hi) - C(z_lo))`` in cell^2 metres."""
-        import drjit as dr
-        import mitsuba as mi
         total = mi.Float(0.0)
         for j, wy, oky in self.cols_y:
             for i, wx, okx in self.cols_x:
@@ -232,7 +226,6 @@ class ConvolutionSurface(Node):
     # sqrt(3) + tilt, and tilt = 0 gives the paper's field exactly (tests compare both).
 
     def __init__(self, stacks: MaterialStacks, sigma=None, materials=SOLID, tilt=TILT):
-        from arches_render.backend import variant
         variant()
         s = stacks.cell
         sigma = 0.5 * s if sigma is None else float(sigma)
@@ -276,7 +269,6 @@ class ConvolutionSurface(Node):
         return F - self._tie(p)
 
     def _tie(self, p):
-        import drjit as dr
         return self._tilt * dr.clip(p.z - self._z_mid, -self._half, self._half)
 
     def _flat(self, p, code):
@@ -292,7 +284,6 @@ class ConvolutionSurface(Node):
     def _value(self, p, code):
         # Where the coarse grid proves the cube empty (code -1) or full (+1) the value is
         # exactly -sigma or +sigma; packets without any other lane skip the column sums.
-        import drjit as dr
         if not dr.flag(dr.JitFlag.SymbolicScope):
             # Evaluated mode: compressing the lanes would cost more than it saves.
             return dr.select(code == 0.0, self._exact(p), self._flat(p, code))
@@ -304,7 +295,6 @@ class ConvolutionSurface(Node):
         return self._value(p, code)
 
     def eval_bounds(self, p, levels, direction=None):
-        import drjit as dr
         code, S = self._coarse.lookup(p)
         f = self._value(p, code)
         hart = hart_bounds(f, levels, self.lipschitz)
@@ -355,7 +345,6 @@ class MaterialRatio(Node):
     kind = "layers_ratio"
 
     def __init__(self, stacks: MaterialStacks, materials, sigma=None, ground=SOLID):
-        from arches_render.backend import variant
         variant()
         s = stacks.cell
         sigma = s if sigma is None else float(sigma)
@@ -373,7 +362,6 @@ class MaterialRatio(Node):
         self._sigma = opaque_float(sigma)
 
     def eval(self, p):
-        import drjit as dr
         fp = _Footprint(self, p)
         lo, hi = p.z - self._sigma, p.z + self._sigma
         a = fp.integral(self, self.part, lo, hi)
@@ -405,7 +393,6 @@ class _CoarseDistance:
     """
 
     def __init__(self, arrays, stacks: MaterialStacks, sigma, max_cells=1 << 21):
-        import mitsuba as mi
         from scipy.ndimage import distance_transform_cdt
         off, bot, top, _ = arrays
         x0, y0, z0 = stacks.origin
@@ -440,8 +427,6 @@ class _CoarseDistance:
 
     def lookup(self, p):
         """``(code, S)`` of the cell of ``p`` (clamped to the grid), plus the cell data."""
-        import drjit as dr
-        import mitsuba as mi
         idx, rel = [], []
         for a, n in enumerate(self.res):
             q = (p[a] - self._g0[a]) * self._inv_c
@@ -458,7 +443,6 @@ class _CoarseDistance:
 
     def free_distance(self, p, S_rel, direction=None):
         """Distance from ``p`` to the faces of its empty box ``B`` (ball, or along a line)."""
-        import drjit as dr
         S, rel = S_rel
         reach = dr.maximum(S, 0.0) - 1.0
         d = None

@@ -30,6 +30,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from arches_render.atomic import atomic_path
+from arches_render.field import evaluate
+
 #: Material ids. Stable materials (bedrock, sandstone, water) never flow; granular
 #: ones (sand, rock) flow by their angle of repose (section 3.4).
 MATERIALS = {"air": 0, "bedrock": 1, "sand": 2, "rock": 3, "water": 4, "sandstone": 5}
@@ -278,7 +281,6 @@ class MaterialStacks:
         -------
         MaterialStacks
         """
-        from arches_render.field import evaluate
         x0, y0, x1, y1 = (float(v) for v in extent)
         nx = int(round((x1 - x0) / cell))
         ny = int(round((y1 - y0) / cell))
@@ -342,7 +344,6 @@ class MaterialStacks:
     # ------------------------------------------------------------------- files
     def save(self, path) -> None:
         """Write the stacks to an ``.npz`` file atomically."""
-        from arches_render.atomic import atomic_path
         with atomic_path(path) as tmp:
             with open(tmp, "wb") as f:
                 np.savez_compressed(

@@ -32,6 +32,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from arches_render.field import evaluate
+
 from . import corner_cubes as cc
 from .rock_store import RockStore
 from .seed_points import hash_uniform
@@ -57,7 +59,6 @@ class FieldSupport:
         return np.asarray(lo, float), np.asarray(hi, float)
 
     def value(self, points):
-        from arches_render.field import evaluate
         return evaluate(self.node, points).astype(np.float64)
 
     def inside(self, points):

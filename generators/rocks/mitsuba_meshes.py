@@ -11,6 +11,11 @@ stays on the rock.
 
 from __future__ import annotations
 
+import drjit as dr
+import mitsuba as mi
+
+from arches_render.materials.triplanar import OBJP_ATTRIBUTE
+
 __all__ = ["rock_meshes_mitsuba"]
 
 
@@ -30,10 +35,6 @@ def rock_meshes_mitsuba(buffers: list, bsdf, name: str = "rocks") -> list:
     -------
     list of mi.Mesh
     """
-    import drjit as dr
-    import mitsuba as mi
-
-    from arches_render.materials.triplanar import OBJP_ATTRIBUTE
     out = []
     for i, b in enumerate(buffers):
         props = mi.Properties()

@@ -26,6 +26,8 @@ Paris, A. et al. (2019). Terrain amplification with implicit 3D features. ACM TO
 
 from __future__ import annotations
 
+import drjit as dr
+
 from arches_render.field.node import Node, hart_bounds
 
 from .geology import ResistanceNode
@@ -60,7 +62,6 @@ class Erosion(Node):
     def _erode(self, p, f):
         # The geology tree is evaluated only where the erosion field is positive
         # (a symbolic branch: packets with no such lane skip it).
-        import drjit as dr
         fd = self.children[1].eval(p)
 
         def eroded(p, f, fd):
@@ -79,7 +80,6 @@ class Erosion(Node):
         erosion field's local bounds, see the module docstring); ``M`` is the child's
         ``value_max`` (erosion only removes), or None. ``None`` when the erosion field
         has no local bounds."""
-        import drjit as dr
         own = getattr(self.children[1], "local_lipschitz", None)
         if own is None:
             return None
@@ -89,7 +89,6 @@ class Erosion(Node):
         return L, self.value_max, (rD if rf is None else dr.minimum(rf, rD))
 
     def eval_bounds(self, p, levels, direction=None):
-        import drjit as dr
         f, ds = self.children[0].eval_bounds(p, levels, direction)
         v = self._erode(p, f)
         local = self.local_lipschitz(p)

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import math
 
+import drjit as dr
 import numpy as np
 
 #: ``max |g'(u)|`` over ``u in [0, 1]`` for ``g(u) = (1 - u^2)^3``.
@@ -63,7 +64,6 @@ def g(r, R):
 
 def g_dr(u2):
     """``g`` as a function of ``u^2 = (r/R)^2`` in Dr.Jit (0 for ``u^2 >= 1``)."""
-    import drjit as dr
     w = dr.maximum(1.0 - u2, 0.0)
     return w * w * w
 
@@ -122,6 +122,5 @@ def sigmoid_np(x, R: float, T: float):
 
 def sigmoid_dr(x, R, a, b):
     """``s(x)`` in Dr.Jit; ``R``, ``a``, ``b`` are opaque ``mi.Float``."""
-    import drjit as dr
     m = dr.minimum(dr.abs(x), R)
     return dr.copysign(m + m * m * (a + b * m), x)

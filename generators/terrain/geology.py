@@ -43,6 +43,8 @@ from __future__ import annotations
 
 import math
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 
 from arches_render.field.node import Node, evaluate, opaque_float, opaque_point
@@ -65,7 +67,6 @@ class ResistanceNode(Node):
 
     def rho(self, p):
         """Resistance clamped to ``[0, 1]`` on ``mi.Point3f``."""
-        import drjit as dr
         return dr.clip(self.eval(p), 0.0, 1.0)
 
 
@@ -77,8 +78,6 @@ def _check(child):
 
 class _Noise:
     def _init_noise(self, wavelength, octaves, lacunarity, gain, seed):
-        import drjit as dr
-        import mitsuba as mi
         if not wavelength > 0:
             raise ValueError("wavelength must be > 0")
         if not 1 <= int(octaves) <= 12:
@@ -125,7 +124,6 @@ class Turbulence(_Noise, ResistanceNode):
         self._amp, self._off = opaque_float(amplitude), opaque_float(offset)
 
     def eval(self, p):
-        import mitsuba as mi
         q = mi.Point3f(0.0, 0.0, p.z) if self.strata else p
         return self._off + self._amp * self._t(q)
 
@@ -161,7 +159,6 @@ class StrataPlane(ResistanceNode):
         self._inv_R, self._w = opaque_float(1.0 / R), opaque_float(weight)
 
     def eval(self, p):
-        import drjit as dr
         d = dr.dot(self._n, p - self._o) * self._inv_R
         return self._w * g_dr(d * d)
 
@@ -195,7 +192,6 @@ class Strata(ResistanceNode):
         self._inv_R, self._w, self._ph = opaque_float(1.0 / R), opaque_float(weight), opaque_float(phase)
 
     def eval(self, p):
-        import drjit as dr
         x = dr.dot(self._n, p) - self._ph
         d = (x - self._sp * dr.round(x * self._inv_sp)) * self._inv_R
         return self._w * g_dr(d * d)
@@ -226,7 +222,6 @@ class LocalSkeleton(ResistanceNode):
         self._inv_R, self._w = opaque_float(1.0 / R), opaque_float(weight)
 
     def eval(self, p):
-        import drjit as dr
         pa = p - self._a
         t = dr.clip(dr.dot(pa, self._ba) * self._inv_l2, 0.0, 1.0)
         return self._w * g_dr(dr.squared_norm(pa - self._ba * t) * dr.square(self._inv_R))
@@ -250,7 +245,6 @@ class Constant(ResistanceNode):
         self._v = opaque_float(value)
 
     def eval(self, p):
-        import mitsuba as mi
         return mi.Float(0.0) + self._v
 
     @property
@@ -299,7 +293,6 @@ class Fold(_Noise, ResistanceNode):
         self._amp = opaque_float(amplitude)
 
     def eval(self, p):
-        import mitsuba as mi
         w = mi.Vector3f(self._t(p, 0), self._t(p, 1), self._t(p, 2))
         return self.children[0].eval(p + self._amp * w)
 
@@ -342,7 +335,6 @@ class Fault(ResistanceNode):
     def eval(self, p):
         # Away from the gouge one evaluation of the child suffices (at p or at the
         # slipped p); the second one runs only for packets with lanes in the gouge.
-        import drjit as dr
         w = dr.clip(dr.dot(self._n, p - self._o) * self._inv_w, 0.0, 1.0)
         first = self.children[0].eval(dr.select(w >= 1.0, p + self._slip, p))
 

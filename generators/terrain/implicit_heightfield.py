@@ -60,13 +60,16 @@ from __future__ import annotations
 
 import math
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 
+from arches_render.backend import variant
 from arches_render.field import Heightfield
 from arches_render.field.node import box_distance, opaque_float
 from arches_render.field.noise import fbm, fbm_lipschitz, fbm_range
 
-from .falloff import G_SLOPE, sigmoid_coefficients, sigmoid_dr, sigmoid_slope
+from .falloff import G_SLOPE, g_dr, sigmoid_coefficients, sigmoid_dr, sigmoid_slope
 from .skeletal_set import SkeletalSet
 
 R0_FACTOR = math.sqrt(1.0 - 2.0 ** (-1.0 / 3.0))
@@ -143,8 +146,6 @@ class ImplicitHeightfield(Heightfield):
             self._amp_a = opaque_float(p["amplitude"])
             self._amp_inv_wl = opaque_float(1.0 / p["wavelength"])
             self._amp_lac, self._amp_gain = opaque_float(p["lacunarity"]), opaque_float(p["gain"])
-            import drjit as dr
-            import mitsuba as mi
             self._amp_seed = dr.opaque(mi.UInt32, int(p["seed"]) & 0xFFFFFFFF)
         self.extra_hi, self.extra_lo = extra_hi, extra_lo
 
@@ -171,7 +172,6 @@ class ImplicitHeightfield(Heightfield):
     # -- elevation ------------------------------------------------------------------
     def elevation(self, x, y):
         """``h(x, y)`` (``mi.Float`` each): grid + elevation primitives + fBm."""
-        import mitsuba as mi
         h = self.height(x, y)
         if self.bumps is not None:
             h = h + self.bumps.field(mi.Point3f(x, y, 0.0))
@@ -183,10 +183,7 @@ class ImplicitHeightfield(Heightfield):
 
     def elevation_np(self, x, y) -> np.ndarray:
         """``h`` on numpy coordinates (same code as the renderer's, through Dr.Jit)."""
-        from arches_render.backend import variant
         variant()
-        import drjit as dr
-        import mitsuba as mi
         x = np.asarray(x, dtype=np.float32)
         y = np.broadcast_to(np.asarray(y, dtype=np.float32), x.shape)
         h = self.elevation(mi.Float(x.ravel()), mi.Float(np.ascontiguousarray(y).ravel()))
@@ -195,19 +192,14 @@ class ImplicitHeightfield(Heightfield):
 
     # -- field ----------------------------------------------------------------------
     def _prism(self, p):
-        import drjit as dr
-        from .falloff import g_dr
         d = box_distance(p, self._plo, self._phi)
         return self._T * (2.0 * g_dr(dr.square(d / self._R)) - 1.0), d
 
     def eval(self, p):
-        import drjit as dr
         fT = sigmoid_dr(self.elevation(p.x, p.y) - p.z, self._R, self._a, self._b)
         return dr.minimum(fT, self._prism(p)[0])
 
     def eval_bounds(self, p, levels, direction=None):
-        import drjit as dr
-        import mitsuba as mi
         v = self.elevation(p.x, p.y) - p.z
         fP, dP = self._prism(p)
         f = dr.minimum(sigmoid_dr(v, self._R, self._a, self._b), fP)

@@ -34,6 +34,8 @@ from __future__ import annotations
 
 import math
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 
 from arches_render.field.node import Node, box_union
@@ -59,7 +61,6 @@ def local_lipschitz(node: Node, p):
 
 def local_hart(f, levels, L, r, L_global):
     """Distance bounds ``max(min(r, (-f - c)/L), (-f - c)/L_global)`` for each level."""
-    import drjit as dr
     out = []
     for c in levels:
         gap = dr.maximum(-f - c, 0.0)
@@ -88,7 +89,6 @@ class Sum(Node):
         return v
 
     def eval_bounds(self, p, levels, direction=None):
-        import drjit as dr
         sups = [value_max(c) for c in self.children]
         f, ds = None, [None] * len(levels)
         for i, child in enumerate(self.children):
@@ -146,8 +146,6 @@ class LocalWarp(_FbmParams, Node):
         self._init_fbm(amplitude, wavelength, octaves, lacunarity, gain, seed)
 
     def eval(self, p):
-        import drjit as dr
-        import mitsuba as mi
         m = dr.clip(self.children[1].eval(p), 0.0, 1.0)
         w = mi.Vector3f(self._fbm(p, 0), self._fbm(p, 1), self._fbm(p, 2))
         return self.children[0].eval(p + (self.amplitude * m) * w)

@@ -60,8 +60,11 @@ Wyvill, B., Guy, A., Galin, E. (1999). Extending the CSG tree. CGF 18(2).
 
 from __future__ import annotations
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 
+from arches_render.atomic import atomic_write
 from arches_render.field.node import Node, opaque_float
 from arches_render.field.noise import fbm, fbm_lipschitz, fbm_range
 from arches_render.field.primitive_set import empty_distance, grid_lists
@@ -130,8 +133,6 @@ class SkeletalSet(Node):
 
     def __init__(self, a, b=None, radius=1.0, energy=1.0, core=0.0, group=None, noise=None,
                  combine="sum", threshold=0.0, cell_size=None, max_cells=1 << 20):
-        import drjit as dr
-        import mitsuba as mi
         a = np.asarray(a, dtype=np.float64)
         if a.ndim != 2 or a.shape[1] != 3 or len(a) == 0:
             raise ValueError(f"a must be a non-empty (N, 3) array (got shape {a.shape})")
@@ -284,8 +285,6 @@ class SkeletalSet(Node):
 
     # -- evaluation ---------------------------------------------------------------
     def _cell(self, p):
-        import drjit as dr
-        import mitsuba as mi
         rx, ry, rz = (int(v) for v in self.res)
         fx, fy, fz = ((p[i] - self._glo[i]) * self._inv_cell for i in range(3))
         inside = ((fx >= 0) & (fy >= 0) & (fz >= 0) & (fx < rx) & (fy < ry) & (fz < rz))
@@ -296,8 +295,6 @@ class SkeletalSet(Node):
 
     def _falloff(self, p, k):
         """``g(d~)`` of primitive ``k`` at ``p`` (a value in [0, 1])."""
-        import drjit as dr
-        import mitsuba as mi
         a = mi.Point3f(dr.gather(mi.Float, self._ax, k), dr.gather(mi.Float, self._ay, k),
                        dr.gather(mi.Float, self._az, k))
         ba = mi.Vector3f(dr.gather(mi.Float, self._bax, k), dr.gather(mi.Float, self._bay, k),
@@ -329,8 +326,6 @@ class SkeletalSet(Node):
 
     def field(self, p):
         """Combined field ``F(p)`` (before the threshold) as ``mi.Float``."""
-        import drjit as dr
-        import mitsuba as mi
         cell, inside = self._cell(p)
         start = dr.gather(mi.UInt32, self._start, cell)
         count = dr.select(inside, dr.gather(mi.UInt32, self._count, cell), 0)
@@ -367,8 +362,6 @@ class SkeletalSet(Node):
         """``(L, M, r)``: within the ball of radius ``r`` (one cell edge) around ``p``,
         ``|grad F| <= L`` and ``F <= M`` (maxima over the 3x3x3 cells around ``p``'s
         cell, which hold that ball; 0 far from every primitive)."""
-        import drjit as dr
-        import mitsuba as mi
         cell, _ = self._cell(p)
         return (dr.gather(mi.Float, self._cell_L, cell), dr.gather(mi.Float, self._cell_M, cell),
                 self._cell_edge)
@@ -377,8 +370,6 @@ class SkeletalSet(Node):
         # Local Hart bound: min(r, (-f - c) / L_local) (the ball of radius r has slope
         # <= L_local). {F - T >= -c} also needs F > 0 when c < T, i.e. a primitive's
         # support: the empty-cell distance bounds that (as in CapsuleSet).
-        import drjit as dr
-        import mitsuba as mi
         f = self.eval(p)
         cell, _ = self._cell(p)
         empty = dr.gather(mi.Float, self._empty, cell) if self._empty is not None else None
@@ -411,7 +402,6 @@ def save_npz(path, **arrays) -> None:
     import io
     from pathlib import Path
 
-    from arches_render.atomic import atomic_write
     unknown = set(arrays) - set(NPZ_KEYS)
     if unknown:
         raise ValueError(f"unknown array(s) {sorted(unknown)}; allowed: {', '.join(NPZ_KEYS)}")
