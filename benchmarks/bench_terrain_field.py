@@ -46,7 +46,7 @@ def sea_tree(n_prims=50_000, size=6000.0, res=512, seed=0):
     """A sea-cliff construction tree with ``n_prims`` primitives along the coast."""
     from arches_render.generators.terrain import geology as G
     from arches_render.generators.terrain.erosion_node import Erosion
-    from arches_render.generators.terrain.fbm_heightmap import fbm_heightmap
+    from arches_render.field.heightmaps import fbm_heightmap
     from arches_render.generators.terrain.implicit_heightfield import ImplicitHeightfield
     from arches_render.generators.terrain.operators import Sum
     from arches_render.generators.terrain.skeletal_set import SkeletalSet

@@ -10,7 +10,7 @@ import numpy as np
 
 
 def main(seed: int = 12, count: int = 2000) -> None:
-    from arches_render.generators.terrain.fbm_heightmap import fbm_heightmap
+    from arches_render.field.heightmaps import fbm_heightmap
 
     extent = (-40.0, -40.0, 40.0, 40.0)
     heights = fbm_heightmap(extent, (161, 161), amplitude=4.0, wavelength=30.0, octaves=5, seed=8)

@@ -8,7 +8,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from arches_render.generators.terrain import dem_io, hydrology as hy
+from arches_render.field import heightmaps
+from arches_render.generators.terrain import hydrology as hy
 from arches_render.generators.terrain.accessibility import accessibility, heightfield_mesh
 from arches_render.generators.terrain.shallow_erosion import erosion_intensity, poisson_thin
 
@@ -171,10 +172,10 @@ def test_dem_png16_tiff_npy_agree(tmp_path):
     iio.imwrite(tmp_path / "a.png", raw)
     tifffile.imwrite(tmp_path / "a.tif", raw.astype(np.float32))
     np.save(tmp_path / "a.npy", raw.astype(np.float64))
-    png = dem_io.read_dem(tmp_path / "a.png")
+    png = heightmaps.read_dem(tmp_path / "a.png")
     assert png.normalised and np.allclose(png.heights * 65535, raw)
-    np.testing.assert_array_equal(dem_io.read_dem(tmp_path / "a.tif").heights, raw)
-    np.testing.assert_array_equal(dem_io.read_dem(tmp_path / "a.npy").heights, raw)
+    np.testing.assert_array_equal(heightmaps.read_dem(tmp_path / "a.tif").heights, raw)
+    np.testing.assert_array_equal(heightmaps.read_dem(tmp_path / "a.npy").heights, raw)
 
 
 def test_dem_nodata_is_filled_with_the_nearest_height(tmp_path):
@@ -182,14 +183,14 @@ def test_dem_nodata_is_filled_with_the_nearest_height(tmp_path):
     H = np.tile(np.arange(10.0), (8, 1))
     H[2:4, 6:8] = np.nan
     np.save(tmp_path / "n.npy", H)
-    dem = dem_io.read_dem(tmp_path / "n.npy")
+    dem = heightmaps.read_dem(tmp_path / "n.npy")
     assert dem.filled == 4 and np.all(np.isfinite(dem.heights)) and "no-data" in dem.notes[0]
     assert set(np.unique(dem.heights[2:4, 6:8])) <= {5.0, 6.0, 7.0, 8.0}
     # GeoTIFF no-data tag (GDAL_NODATA, 42113).
     T = np.tile(np.arange(6.0, dtype=np.float32), (6, 1))
     T[0, 0] = -9999
     tifffile.imwrite(tmp_path / "t.tif", T, extratags=[(42113, "s", 0, "-9999", True)])
-    got = dem_io.read_dem(tmp_path / "t.tif")
+    got = heightmaps.read_dem(tmp_path / "t.tif")
     assert got.filled == 1 and got.heights[0, 0] in (0.0, 1.0)
 
 
@@ -197,23 +198,23 @@ def test_dem_nodata_is_filled_with_the_nearest_height(tmp_path):
                                            ((4, 4, 4, 4), "2-D")])
 def test_dem_too_small_or_not_2d(tmp_path, shape, message):
     np.save(tmp_path / "s.npy", np.zeros(shape))
-    with pytest.raises(dem_io.DEMError, match=message):
-        dem_io.read_dem(tmp_path / "s.npy")
+    with pytest.raises(heightmaps.DEMError, match=message):
+        heightmaps.read_dem(tmp_path / "s.npy")
 
 
 def test_dem_all_nodata_flat_and_unknown(tmp_path):
     np.save(tmp_path / "nan.npy", np.full((5, 5), np.nan))
-    with pytest.raises(dem_io.DEMError, match="no valid height"):
-        dem_io.read_dem(tmp_path / "nan.npy")
+    with pytest.raises(heightmaps.DEMError, match="no valid height"):
+        heightmaps.read_dem(tmp_path / "nan.npy")
     np.save(tmp_path / "flat.npy", np.full((5, 5), 7.0))
-    flat = dem_io.read_dem(tmp_path / "flat.npy")
+    flat = heightmaps.read_dem(tmp_path / "flat.npy")
     assert np.all(flat.heights == 7.0) and any("flat" in n for n in flat.notes)
     (tmp_path / "x.jpg").write_bytes(b"nope")
-    with pytest.raises(dem_io.DEMError, match="unknown DEM format"):
-        dem_io.read_dem(tmp_path / "x.jpg")
+    with pytest.raises(heightmaps.DEMError, match="unknown DEM format"):
+        heightmaps.read_dem(tmp_path / "x.jpg")
     (tmp_path / "bad.png").write_bytes(b"not a png")
-    with pytest.raises(dem_io.DEMError, match="cannot read"):
-        dem_io.read_dem(tmp_path / "bad.png")
+    with pytest.raises(heightmaps.DEMError, match="cannot read"):
+        heightmaps.read_dem(tmp_path / "bad.png")
 
 
 def test_dem_20000_squared_is_reduced_with_bounded_memory(tmp_path):
@@ -225,7 +226,7 @@ def test_dem_20000_squared_is_reduced_with_bounded_memory(tmp_path):
     big.flush()
     del big
     before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    dem = dem_io.read_dem(path, max_samples=1000 * 1000)
+    dem = heightmaps.read_dem(path, max_samples=1000 * 1000)
     grown_mb = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024
     assert dem.heights.shape == (1000, 1000) and dem.step == 20 and dem.source_shape == (20000, 20000)
     assert dem.heights[:50, :50].min() == 3.0 and dem.heights[60:, 60:].max() == 0.0
@@ -236,9 +237,9 @@ def test_dem_20000_squared_is_reduced_with_bounded_memory(tmp_path):
 def test_dem_huge_png_is_refused_clearly(tmp_path, monkeypatch):
     import imageio.v3 as iio
     iio.imwrite(tmp_path / "p.png", np.zeros((40, 40), np.uint16))
-    monkeypatch.setattr(dem_io, "DECODE_LIMIT", 1000)
-    with pytest.raises(dem_io.DEMError, match="more than a PNG can be decoded"):
-        dem_io.read_dem(tmp_path / "p.png")
+    monkeypatch.setattr(heightmaps, "DECODE_LIMIT", 1000)
+    with pytest.raises(heightmaps.DEMError, match="more than a PNG can be decoded"):
+        heightmaps.read_dem(tmp_path / "p.png")
 
 
 def test_accessibility_of_open_ground_is_one_at_any_reach():

@@ -1,7 +1,7 @@
 """``arches-render amplify DEM -o SCENE.toml``: a DEM amplified into a volumetric terrain scene.
 
 Reads a DEM (``.npy``, 16-bit ``.png``, GeoTIFF ``.tif``; see
-:mod:`arches_render.generators.terrain.dem_io`), builds the construction tree of a
+:mod:`arches_render.field.heightmaps`), builds the construction tree of a
 preset (:mod:`arches_render.generators.terrain.amplify`) and writes a scene that
 renders as it is: the ``[nodes.*]`` of the tree, the heights (``.npy``) and the
 primitive arrays (``.npz``) beside it (or under ``--data-dir``), a camera framed on
@@ -88,7 +88,7 @@ def _scene_doc(result, name):
 def run(args) -> int:
     from ..atomic import atomic_write
     from ..generators.terrain.amplify import amplify
-    from ..generators.terrain.dem_io import DEMError, read_dem
+    from ..field.heightmaps import DEMError, read_dem
     from ..generators.terrain.scene_writer import toml_text
 
     out = Path(args.output)

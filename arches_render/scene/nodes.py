@@ -43,6 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import field as F
+from ..field.heightmaps import DEMError, fbm_heightmap, read_dem
 from .errors import SceneError
 from .validate import Table
 
@@ -63,10 +64,9 @@ def fbm_args(t: Table, amplitude=1.0, wavelength=1.0, octaves=4):
 def load_heights(t: Table, base_dir: Path) -> np.ndarray:
     """Heights (metres) of the table's ``file``, scaled by ``height_scale`` and offset.
 
-    One DEM reader for scenes and ``amplify`` (formats, no-data filling, size limits).
+    One DEM reader for scenes and ``amplify`` (:func:`arches_render.field.heightmaps.read_dem`:
+    formats, no-data filling, size limits).
     """
-    # One DEM reader for scenes and `amplify` (formats, no-data filling, size limits).
-    from ..generators.terrain.dem_io import DEMError, read_dem
     try:
         H = read_dem(base_dir / t.string("file"), max_samples=8192 * 8192).heights
     except DEMError as exc:
@@ -84,7 +84,6 @@ def heightfield_node(t: Table, ctx):
     if source == "file":
         H = load_heights(t, ctx.base_dir)
     else:
-        from ..generators.terrain.fbm_heightmap import fbm_heightmap
         res = t.raw("resolution", [256, 256])
         if (not isinstance(res, list) or len(res) != 2
                 or not all(isinstance(v, int) and 2 <= v <= 8192 for v in res)):

@@ -1,11 +1,13 @@
-"""Reading digital elevation models (DEMs): 16-bit PNG, GeoTIFF and ``.npy``.
+"""Height grids for ``Heightfield`` nodes: read from DEM files or made from fBm.
 
-One reader for the whole project: the ``heightfield`` scene node (``source =
-"file"``) and ``arches-render amplify`` both call :func:`read_dem`, so a DEM reads
-the same way everywhere.
+One module for the height data of the whole project: the ``heightfield`` scene node
+(``source = "file"`` or ``"fbm"``), the terrain generators and ``arches-render
+amplify`` all call :func:`read_dem` and :func:`fbm_heightmap`, so a DEM reads, and
+an fBm relief is made, the same way everywhere. Nothing here knows a scene file or
+a generator.
 
-Formats and units
------------------
+DEM formats and units
+---------------------
 ``.npy``          a 2-D numeric array, read through a memory map (large files are
                   never loaded whole); values are metres.
 ``.tif/.tiff``    GeoTIFF through tifffile (first page; memory-mapped when the file
@@ -31,6 +33,24 @@ so a 20,000 x 20,000 ``.npy`` is read with a few megabytes of memory. A compress
 GeoTIFF or a PNG must be decoded whole; beyond :data:`DECODE_LIMIT` samples they are
 refused with a clear error (convert them to ``.npy`` or an uncompressed GeoTIFF).
 A DEM must have at least 2 x 2 samples.
+
+fBm heightmaps
+--------------
+:func:`fbm_heightmap` samples the same :class:`~arches_render.field.Noise` node that
+scenes use elsewhere (one construction tree, one noise), on the plane ``z = 0``:
+
+    h(x, y) = offset + amplitude * shape(n(x, y)),
+
+where ``n`` is fBm normalized to about ``[0, 1]``, ``shape`` optionally folds it into
+ridges (``1 - |2n - 1|``, Musgrave's ridged multifractal idea) and raises it to
+``power`` (values > 1 widen valleys and sharpen peaks). With ``edge_falloff`` the
+relief fades to ``offset`` over that many metres at the border of the tile, so the
+tile meets a plain without a cliff.
+
+References
+----------
+Musgrave, F. K., Kolb, C. E., Mace, R. S. (1989). The synthesis and rendering of
+eroded fractal terrains. SIGGRAPH '89.
 """
 
 from __future__ import annotations
@@ -39,9 +59,17 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import imageio.v3 as iio
 import numpy as np
+import tifffile
+from PIL import Image
+from scipy.ndimage import distance_transform_edt
 
-__all__ = ["DEM", "DEMError", "read_dem", "fill_nodata", "block_mean", "DECODE_LIMIT"]
+from .node import evaluate
+from .noise import fbm_range
+from .warps import Noise
+
+__all__ = ["DEM", "DEMError", "read_dem", "fill_nodata", "block_mean", "DECODE_LIMIT", "fbm_heightmap"]
 
 #: Largest number of samples decoded whole (PNG, compressed TIFF): 16384^2.
 DECODE_LIMIT = 16384 * 16384
@@ -141,7 +169,6 @@ def fill_nodata(heights, invalid=None):
     DEMError
         When no cell is valid.
     """
-    from scipy.ndimage import distance_transform_edt
     H = np.array(heights, dtype=np.float64)
     bad = ~np.isfinite(H) if invalid is None else (invalid | ~np.isfinite(H))
     n = int(bad.sum())
@@ -195,20 +222,17 @@ def _open_npy(path):
 
 
 def _open_png(path):
-    from PIL import Image
     with Image.open(path) as im:
         w, h = im.size
     if w * h > DECODE_LIMIT:
         raise DEMError(f"{path} has {w}x{h} samples, more than a PNG can be decoded whole "
                        f"({DECODE_LIMIT} samples); convert it to .npy or an uncompressed GeoTIFF")
-    import imageio.v3 as iio
-    from PIL import Image as _I
-    limit = _I.MAX_IMAGE_PIXELS
+    limit = Image.MAX_IMAGE_PIXELS
     try:  # Pillow's decompression-bomb guard also trips on honest large DEMs
-        _I.MAX_IMAGE_PIXELS = None
+        Image.MAX_IMAGE_PIXELS = None
         raw = iio.imread(path)
     finally:
-        _I.MAX_IMAGE_PIXELS = limit
+        Image.MAX_IMAGE_PIXELS = limit
     if raw.ndim == 3:
         raw = raw[..., 0]
     if np.issubdtype(raw.dtype, np.integer):
@@ -217,7 +241,6 @@ def _open_png(path):
 
 
 def _open_tiff(path):
-    import tifffile
     with tifffile.TiffFile(path) as tf:
         page = tf.pages[0]
         nodata = None
@@ -323,3 +346,59 @@ def read_dem(path, max_samples=DEFAULT_MAX_SAMPLES, nodata=None):
     if float(H.max() - H.min()) == 0.0:
         notes.append("the DEM is flat (all heights equal)")
     return DEM(H, path, shape, step, normalised, filled, notes)
+
+
+def fbm_heightmap(extent, resolution, amplitude=30.0, wavelength=80.0, octaves=6, lacunarity=2.0,
+                  gain=0.5, seed=0, ridged=False, power=1.0, offset=0.0, edge_falloff=0.0):
+    """Sample an fBm heightmap (see the module docstring).
+
+    Parameters
+    ----------
+    extent : sequence of 4 floats
+        ``(x0, y0, x1, y1)`` in metres.
+    resolution : sequence of 2 ints
+        ``(nx, ny)`` samples, each >= 2.
+    amplitude, offset : float
+        Height range and base elevation in metres.
+    wavelength : float
+        Period of the first octave in metres.
+    octaves : int
+        fBm octaves.
+    lacunarity, gain : float
+        Frequency and amplitude ratios between octaves.
+    seed : int
+        Noise seed: the same seed gives the same heights.
+    ridged : bool
+        Fold the noise into ridges.
+    power : float
+        Exponent applied to the normalized noise.
+    edge_falloff : float
+        Width in metres of the border over which the relief fades out (0: none).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(ny, nx)`` float64 heights.
+
+    References
+    ----------
+    Musgrave, Kolb, Mace (1989), ridged multifractal terrains.
+    """
+    x0, y0, x1, y1 = extent
+    nx, ny = int(resolution[0]), int(resolution[1])
+    xs, ys = np.linspace(x0, x1, nx), np.linspace(y0, y1, ny)
+    X, Y = np.meshgrid(xs, ys)
+    pts = np.stack([X.ravel(), Y.ravel(), np.zeros(X.size)], axis=1)
+    noise = Noise(1.0, wavelength, octaves, lacunarity, gain, seed)
+    n = evaluate(noise, pts).astype(np.float64).reshape(ny, nx)
+    # Gradient noise rarely exceeds ~0.7 of its bound: map that range onto [0, 1].
+    typical = 0.7 * fbm_range(octaves, gain) / 1.5
+    u = np.clip(0.5 + 0.5 * n / typical, 0.0, 1.0)
+    if ridged:
+        u = 1.0 - np.abs(2.0 * u - 1.0)
+    u = u ** float(power)
+    if edge_falloff > 0:
+        border = np.minimum(np.minimum(X - x0, x1 - X), np.minimum(Y - y0, y1 - Y))
+        t = np.clip(border / edge_falloff, 0.0, 1.0)
+        u = u * t * t * (3.0 - 2.0 * t)
+    return offset + amplitude * u
