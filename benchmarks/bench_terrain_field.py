@@ -117,7 +117,7 @@ def bench_terrain_field_evals_50k(repeat):
 
 def bench_terrain_banded_speedup(repeat):
     from arches_render.backend import variant
-    from arches_render.mesh.banded import BandStats, polygonize_banded, polygonize_dense
+    from arches_render.generators.terrain.banded import BandStats, polygonize_banded, polygonize_dense
     variant()
     # The primitive density of the 50k tree (~1,400 per km^2, as the paper's Sea).
     root, terrain, sets = sea_tree(n_prims=900, size=800.0, res=256, seed=3)

@@ -57,6 +57,7 @@ from pathlib import Path
 import numpy as np
 
 from .accessibility import heightfield_mesh
+from .banded import polygonize_banded
 from .falloff import g
 from .shallow_erosion import ErosionPrimitives
 
@@ -224,14 +225,9 @@ def _band_mesh(root, extent, z0, z1, voxel, border):
     import trimesh
 
     from arches_render import field as F
-    from arches_render.mesh.polygonize import polygonize
     x0, y0, x1, y1 = extent
     box = F.Box([(x0 + x1) / 2, (y0 + y1) / 2, (z0 + z1) / 2], [(x1 - x0) / 2, (y1 - y0) / 2, (z1 - z0) / 2])
-    try:
-        from arches_render.mesh.banded import polygonize_banded as poly
-    except ImportError:  # the banded polygonizer makes the same mesh, faster
-        poly = polygonize
-    m = poly(F.Intersection(root, box), voxel)
+    m = polygonize_banded(F.Intersection(root, box), voxel)
     mesh = trimesh.Trimesh(np.asarray(m.vertices, np.float64), np.asarray(m.faces, np.int64), process=False)
     c = mesh.triangles_center
     inner = ((c[:, 0] > x0 + border) & (c[:, 0] < x1 - border) & (c[:, 1] > y0 + border)

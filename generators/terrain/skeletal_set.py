@@ -173,9 +173,7 @@ class SkeletalSet(Node):
         span = self.noise["span"] if self.noise else 0.0
         self.threshold_np = float(threshold)
 
-        reach = c + R * (1.0 + span)
-        lo_p = np.minimum(a, b) - reach[:, None]
-        hi_p = np.maximum(a, b) + reach[:, None]
+        lo_p, hi_p = self.primitive_boxes()
         self.support_lo, self.support_hi = lo_p.min(axis=0), hi_p.max(axis=0)
         cell = float(cell_size) if cell_size else 0.5 * float(np.median((hi_p - lo_p).max(axis=1)))
         if not cell > 0:
@@ -264,6 +262,15 @@ class SkeletalSet(Node):
 
     # Zero (minus the threshold) outside the supports: no unit-rate falloff.
     unit_falloff = False
+
+    def primitive_boxes(self):
+        """Per-primitive support boxes ``(lo (N, 3), hi (N, 3))``: outside its box a
+        primitive's field is exactly 0 (reach ``core + R (1 + noise span)`` around its
+        segment)."""
+        span = self.noise["span"] if self.noise else 0.0
+        reach = self.core_np + self.radius_np * (1.0 + span)
+        return (np.minimum(self.a_np, self.b_np) - reach[:, None],
+                np.maximum(self.a_np, self.b_np) + reach[:, None])
 
     def support(self):
         """Box outside of which every primitive's field is exactly 0."""

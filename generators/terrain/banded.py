@@ -1,5 +1,10 @@
 """Banded polygonization of amplified terrains (Paris et al. 2019, Sec. 7).
 
+Section 7 of the terrain amplification paper, so it lives with the terrain
+generator: it reads the terrain's own node types (implicit heightfields, skeletal
+sets, sums, erosion, local warps) directly, and the core polygonizer
+(:mod:`arches_render.mesh.polygonize`) knows none of them.
+
 The grid is the one of :func:`arches_render.mesh.polygonize.sample_grid` (the
 field's bounds grown by one voxel, vertices ``lo + (i, j, k) voxel``). Instead of
 sampling every vertex, the tree is asked where its surface can be:
@@ -13,7 +18,7 @@ sampling every vertex, the tree is asked where its surface can be:
   that range; its prism adds the bottom plane and, in the columns near its
   walls, the span from the bottom to the ground band.
   A compactly supported operand (a sculpting or erosion
-  :class:`~arches_render.generators.terrain.skeletal_set.SkeletalSet` in a sum,
+  :class:`~.skeletal_set.SkeletalSet` in a sum,
   an erosion or a local warp) marks its primitives' support boxes: outside them it
   adds exactly 0 and the surface is its sibling's. Unions, intersections and
   differences mark their operands' bands (``max(a, b) = 0`` needs ``a = 0`` or
@@ -30,7 +35,7 @@ sampling every vertex, the tree is asked where its surface can be:
   supported modifiers (sum, erosion, local warp of skeletal sets), a column that
   no support touches holds the terrain's field alone, which is a closed form of
   the elevation ``h`` at the column: ``min(s(h - z), f_P)`` for an
-  :class:`~arches_render.generators.terrain.implicit_heightfield.ImplicitHeightfield`
+  :class:`~.implicit_heightfield.ImplicitHeightfield`
   (``min(h - z, box)`` for a plain heightfield), intersected with clip boxes if
   the tree is clipped to a tile. One elevation per column then
   replaces the field evaluations of its band voxels (numba, float32); values
@@ -58,14 +63,27 @@ from dataclasses import dataclass, field
 
 import drjit as dr
 import mitsuba as mi
+import numba
 import numpy as np
+from scipy.ndimage import maximum_filter, minimum_filter
+from skimage.measure import marching_cubes
 
-from ..backend import variant
-from ..field import Node, evaluate
-from ..field.heightfield import Heightfield
-from ..field.operators import Difference, Intersection, Union
-from ..field.primitives import Box
-from .polygonize import MAX_VOXELS, TriangleMesh, default_voxel, field_normals
+from arches_render.backend import variant
+from arches_render.field import Node, evaluate
+from arches_render.field.heightfield import Heightfield
+from arches_render.field.operators import Difference, Intersection, Union, finite_box
+from arches_render.field.primitives import Box
+from arches_render.mesh.polygonize import MAX_VOXELS, TriangleMesh, default_voxel, field_normals
+
+from .erosion_node import Erosion
+from .implicit_heightfield import R0_FACTOR, ImplicitHeightfield
+from .operators import LocalWarp, Sum
+from .skeletal_set import SkeletalSet
+
+__all__ = ["BandStats", "sample_banded", "polygonize_banded", "polygonize_dense"]
+
+#: Terrain nodes whose field is a closed form of one elevation per column.
+TERRAINS = (ImplicitHeightfield, Heightfield)
 
 
 @dataclass
@@ -83,21 +101,11 @@ class BandStats:
     notes: list = field(default_factory=list)
 
 
-def _terrain_types():
-    from ..generators.terrain.implicit_heightfield import ImplicitHeightfield
-    return ImplicitHeightfield, Heightfield
-
-
 def _compact_boxes(node: Node):
     """Per-primitive support boxes ``(lo (N,3), hi (N,3))`` outside which the node is
     exactly 0, or ``None`` when it has no such support."""
-    from ..generators.terrain.operators import Sum
-    from ..generators.terrain.skeletal_set import SkeletalSet
     if isinstance(node, SkeletalSet) and node.threshold_np == 0.0:
-        span = node.noise["span"] if node.noise else 0.0
-        reach = node.core_np + node.radius_np * (1.0 + span)
-        return (np.minimum(node.a_np, node.b_np) - reach[:, None],
-                np.maximum(node.a_np, node.b_np) + reach[:, None])
+        return node.primitive_boxes()
     if isinstance(node, Sum):
         parts = [_compact_boxes(c) for c in node.children]
         if all(p is not None for p in parts):
@@ -112,9 +120,10 @@ _SLACK = 1e-3
 
 class _Grid:
     def __init__(self, node, voxel):
-        lo, hi = node.bounds()
-        if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(hi >= lo)):
+        box = finite_box(node)
+        if box is None or np.any(box[1] < box[0]):
             raise ValueError("banded polygonization needs a bounded, non-empty field")
+        lo, hi = box
         self.lo = lo - voxel
         self.voxel = voxel
         self.shape = np.ceil((hi + voxel - self.lo) / voxel).astype(int) + 1
@@ -172,7 +181,6 @@ def _elevation(node, X, Y):
 
 def _walls_and_bottom(node):
     """(xy rectangle outside of which columns are walls, bottom z) of a terrain node."""
-    from ..generators.terrain.implicit_heightfield import R0_FACTOR, ImplicitHeightfield
     if isinstance(node, ImplicitHeightfield):
         lo, hi = node.prism_lo, node.prism_hi
         return (lo[0], lo[1], hi[0], hi[1]), lo[2] - R0_FACTOR * node.R_np
@@ -181,7 +189,6 @@ def _walls_and_bottom(node):
 
 
 def _mark_terrain(grid: _Grid, node):
-    from scipy.ndimage import maximum_filter, minimum_filter
     X, Y = grid.columns()
     h = _elevation(node, X, Y).astype(np.float64)
     v = grid.voxel
@@ -209,20 +216,13 @@ def _mark_terrain(grid: _Grid, node):
 
 
 def _mark(grid: _Grid, node: Node, stats: BandStats):
-    from ..generators.terrain.erosion_node import Erosion
-    from ..generators.terrain.operators import LocalWarp, Sum
-    from ..generators.terrain.skeletal_set import SkeletalSet
-    if isinstance(node, _terrain_types()):
+    if isinstance(node, TERRAINS):
         _mark_terrain(grid, node)
         return
     if isinstance(node, SkeletalSet):
-        boxes = _compact_boxes(node)
-        if boxes is None:  # threshold != 0: the positive part lies inside the supports too
-            span = node.noise["span"] if node.noise else 0.0
-            reach = node.core_np + node.radius_np * (1.0 + span)
-            boxes = (np.minimum(node.a_np, node.b_np) - reach[:, None],
-                     np.maximum(node.a_np, node.b_np) + reach[:, None])
-        grid.mark_boxes(*boxes)
+        # With a threshold != 0 the set is not compact, but its positive part
+        # still lies inside the primitives' supports.
+        grid.mark_boxes(*node.primitive_boxes())
         return
     if isinstance(node, (Sum, Erosion, LocalWarp)):
         main, compact = _split_compact(node)
@@ -257,8 +257,6 @@ def _mark_box_faces(grid: _Grid, box):
 
 def _split_compact(node):
     """``(main child, [support boxes of the compact operands])`` or ``(None, [])``."""
-    from ..generators.terrain.erosion_node import Erosion
-    from ..generators.terrain.operators import LocalWarp
     if isinstance(node, Erosion):
         boxes = _compact_boxes(node.children[1])
         return (node.children[0], [boxes]) if boxes is not None else (None, [])
@@ -279,10 +277,8 @@ def _split_compact(node):
 def _direct_terrain(node):
     """``(terrain, clip boxes)``: the root equals ``min(terrain, boxes...)`` outside the
     compact supports, or ``(None, [])``."""
-    if isinstance(node, _terrain_types()):
+    if isinstance(node, TERRAINS):
         return node, []
-    from ..generators.terrain.erosion_node import Erosion
-    from ..generators.terrain.operators import LocalWarp, Sum
     if isinstance(node, (Sum, Erosion, LocalWarp)):
         main, _ = _split_compact(node)
         return (None, []) if main is None else _direct_terrain(main)
@@ -299,7 +295,6 @@ def _direct_terrain(node):
 
 def _direct_params(terrain, boxes):
     """``(kind, params, boxes)`` float32 arrays of the direct closed forms for numba."""
-    from ..generators.terrain.implicit_heightfield import ImplicitHeightfield
     if isinstance(terrain, ImplicitHeightfield):
         kind = 0
         params = [terrain.R_np, terrain.sig_a, terrain.sig_b, terrain.T_np, *terrain.prism_lo, *terrain.prism_hi]
@@ -376,7 +371,6 @@ def _kernels():
     """numba kernels (compiled once, cached on disk)."""
     if _NUMBA:
         return _NUMBA
-    import numba
 
     @numba.njit(parallel=True, cache=True)
     def fill_gaps(vol, mask, voxel):
@@ -487,7 +481,6 @@ def _mesh(node, vol, lo, voxel, mask=None, normals=True) -> TriangleMesh:
     """Marching cubes + field normals + one global orientation, as in
     :func:`~arches_render.mesh.polygonize.polygonize`. Without ``normals`` the mesh
     has no normals and scikit-image's winding."""
-    from skimage.measure import marching_cubes
     if not ((mask.any() if mask is not None else True) and vol.max() > 0 > vol.min()):
         raise ValueError("the field has no surface inside its bounds at this voxel size")
     verts, faces, _, _ = marching_cubes(vol, level=0.0, spacing=(voxel,) * 3, mask=mask)
