@@ -24,14 +24,17 @@ import tempfile
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
+from arches_render.render.distributed import dask_client
+from arches_render.render.jobs import set_camera
+from arches_render.render.renderer import build_scene, render_image
+from arches_render.render.turntable import plan_turntable, render_turntable
+from arches_render.scene import load_scene
+from arches_render.timing import REPO
+
 SCENE = REPO / "scenes" / "default.toml"
 
 
 def bench_turntable_frame_s(repeat):
-    from arches_render.render.renderer import build_scene, render_image
-    from arches_render.render.turntable import plan_turntable, render_turntable
-    from arches_render.scene import load_scene
     desc = load_scene(SCENE)
     w, h, spp, frames = 320, 180, 16, 8
     per_frame = []
@@ -44,7 +47,6 @@ def bench_turntable_frame_s(repeat):
             render_turntable(plan, progress=lambda done, total: stamps.append(time.perf_counter()))
             per_frame += [b - a for a, b in zip(stamps[1:], stamps[2:])]
     # Baseline: the same views as plain stills (no AOVs, no files).
-    from arches_render.render.jobs import set_camera
     scene = build_scene(desc, "field", w, h)
     render_image(scene, 4, seed=99)
     still = []
@@ -59,8 +61,6 @@ def bench_turntable_frame_s(repeat):
 
 
 def _fps(workers, plan_fn):
-    from arches_render.render.distributed import dask_client
-    from arches_render.render.turntable import render_turntable
     with dask_client(workers=workers) as client, tempfile.TemporaryDirectory() as tmp:
         render_turntable(plan_fn(Path(tmp) / "warm"), client=client)  # start, build, compile
         plan = plan_fn(Path(tmp) / "timed")
@@ -70,8 +70,6 @@ def _fps(workers, plan_fn):
 
 
 def bench_dask_speedup_2workers(repeat):
-    from arches_render.render.turntable import plan_turntable
-    from arches_render.scene import load_scene
     desc = load_scene(SCENE)
 
     def plan_fn(folder):

@@ -2,11 +2,12 @@
 
     python benchmarks/run.py [--json] [--repeat N] [NAME ...]
 
-This file holds the foundation's benchmarks. Each generator keeps its own in
-``benchmarks/bench_TOPIC.py``, which defines ``BENCHMARKS = {name: (fn, repeat)}``
-with ``fn(repeat) -> dict(value, unit, baseline, baseline_is, ...)`` and documents
-its figures in its docstring; they are collected here in file-name order. Names
-are stable: scripts and notes refer to them.
+This file holds the foundation's benchmarks, ``bench_production.py`` the
+production ones (turntables, Dask). Each generator keeps its own in its package
+(``generators/NAME/benchmarks.py``), declared as ``BENCHMARKS = {name: (fn, repeat)}``
+with ``fn(repeat) -> dict(value, unit, baseline, baseline_is, ...)`` in the
+registry (:mod:`arches_render.extensions`) and documented in its docstring; they
+are listed here in registry order. Names are stable: scripts and notes refer to them.
 
 Figures (medians over ``--repeat`` runs, warm kernels unless stated):
 
@@ -34,20 +35,20 @@ import tempfile
 import time
 from pathlib import Path
 
-import arches_render  # noqa: F401  (first: it chooses the libLLVM that Dr.Jit loads)
+# arches_render first: importing it chooses the libLLVM that Dr.Jit loads on import.
+from arches_render import backend, extensions, field as F  # isort: skip
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
-
-from timing import random_points, timed_eval  # noqa: E402  (benchmarks/ is on sys.path as the script folder)
+import bench_production  # benchmarks/ is on sys.path as the script's folder
+from arches_render.render.renderer import build_scene, render_image
+from arches_render.scene import load_scene
+from arches_render.timing import REPO, random_points, timed_eval
 
 
 def tree20():
     """A ~20-node tree typical of a hand-written scene."""
-    from arches_render import field as F
     x = np.linspace(0, 1, 129)
     X, Y = np.meshgrid(x, x)
     ground = F.Heightfield(8 * np.sin(5 * X) * np.cos(3 * Y) + 4 * X, (-50, -50, 50, 50))
@@ -68,7 +69,6 @@ def bench_field_evals_tree20(repeat):
 
 
 def bench_field_evals_set10k(repeat):
-    from arches_render import field as F
     rng = np.random.default_rng(1)
     a = rng.uniform(-100, 100, (10_000, 3)) * [1, 1, 0.1]
     b = a + rng.normal(0, 1.0, a.shape)
@@ -97,8 +97,6 @@ def bench_field_evals_set10k(repeat):
 
 
 def bench_render_field_vs_mesh(repeat):
-    from arches_render.render.renderer import build_scene, render_image
-    from arches_render.scene import load_scene
     desc = load_scene(REPO / "scenes" / "default.toml")
     w, h, spp = 320, 180, 16
     out = {}
@@ -144,18 +142,9 @@ BENCHMARKS = {
 
 
 def all_benchmarks() -> dict:
-    """The benchmarks above and those of every ``benchmarks/bench_*.py``."""
-    import importlib.util
-    found = dict(BENCHMARKS)
-    for path in sorted(Path(__file__).parent.glob("bench_*.py")):
-        spec = importlib.util.spec_from_file_location(f"arches_benchmarks.{path.stem}", path)
-        module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
-        for name, entry in module.BENCHMARKS.items():
-            if name in found:
-                raise RuntimeError(f"benchmark {name!r} of {path.name} is already defined")
-            found[name] = entry
-    return found
+    """The benchmarks above, the production ones and every generator's (the registry)."""
+    core = {**BENCHMARKS, **bench_production.BENCHMARKS}
+    return {**core, **extensions.benchmarks(core=core)}
 
 
 def main(argv=None) -> int:
@@ -168,7 +157,6 @@ def main(argv=None) -> int:
     unknown = [n for n in args.names if n not in benchmarks]
     if unknown:
         p.error(f"unknown benchmark {unknown[0]!r} (choose from {', '.join(benchmarks)})")
-    from arches_render import backend
     backend.set_variant()
     for name in args.names or benchmarks:
         fn, default_repeat = benchmarks[name]

@@ -1,22 +1,26 @@
-"""Subcommands of ``arches-render`` beyond render, mesh and info, one module each.
+"""Subcommands of ``arches-render``, one module each, and what every command module shares.
 
-A module here defines ``register(subparsers)``: it adds its parser with
+A command module defines ``register(subparsers)``: it adds its parser with
 ``subparsers.add_parser(NAME, help=...)`` and sets ``func`` to a handler
-``handler(args) -> int``. :func:`arches_render.cli.build_parser` discovers the
-modules, so a generator's command lives beside nothing but its own code.
+``handler(args) -> int``. The core commands live here (``render``, ``turntable``,
+``mesh``, ``info``); a generator's commands live in its package and are listed by
+the registry (``COMMANDS``, :mod:`arches_render.extensions`).
+:func:`arches_render.cli.build_parser` registers both.
 
 Handlers raise :class:`UsageError` (bad argument) or
 :class:`~arches_render.scene.SceneError` (bad file) for the user's mistakes: the CLI
 prints the one-line message and exits with status 2, with no traceback. The
-argument parsers below give argparse the same one-line messages.
+argument parsers below give argparse the same one-line messages. This package is
+the command-plugin API a generator's command module may import (with the scene
+API, :mod:`arches_render.scene`); it imports no command module itself.
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib
-import pkgutil
 import sys
+
+from tqdm import tqdm
 
 
 class UsageError(ValueError):
@@ -24,6 +28,7 @@ class UsageError(ValueError):
 
 
 def resolution(text: str):
+    """``'WxH'`` as ``(width, height)``, each in [1, 16384] (an argparse ``type``)."""
     try:
         w, h = (int(v) for v in text.lower().split("x"))
     except ValueError:
@@ -34,6 +39,7 @@ def resolution(text: str):
 
 
 def bounded_int(name, lo, hi):
+    """An argparse ``type`` for option ``name``: an integer in ``[lo, hi]``."""
     def parse(text):
         try:
             v = int(text)
@@ -46,6 +52,7 @@ def bounded_int(name, lo, hi):
 
 
 def positive_float(name):
+    """An argparse ``type`` for option ``name``: a number > 0."""
     def parse(text):
         try:
             v = float(text)
@@ -61,7 +68,6 @@ class Progress:
     """A ``progress(done, total)`` callback drawing a tqdm bar on stderr."""
 
     def __init__(self, desc, unit, quiet):
-        from tqdm import tqdm
         self.bar = tqdm(total=None, desc=desc, unit=unit, disable=quiet, file=sys.stderr,
                         leave=True, dynamic_ncols=True)
 
@@ -72,10 +78,3 @@ class Progress:
 
     def close(self):
         self.bar.close()
-
-
-def discover():
-    """The command modules of this package, in name order."""
-    return [importlib.import_module(f"{__name__}.{m.name}")
-            for m in sorted(pkgutil.iter_modules(__path__), key=lambda m: m.name)
-            if not m.name.startswith("_")]

@@ -17,6 +17,12 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from ..imaging.colour import VIEWS, view_to_uint8
+from ..imaging.exr import read_exr
+from ..imaging.video import write_mp4
+from ..render.distributed import dask_client
+from ..render.turntable import plan_turntable, render_turntable
+from ..scene import load_scene
 from . import Progress, UsageError, bounded_int, resolution
 
 
@@ -44,10 +50,6 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from ..imaging.colour import VIEWS
-    from ..render.turntable import plan_turntable, render_turntable
-    from ..scene import load_scene
-
     view = args.view or "srgb"
     if view not in VIEWS:
         raise UsageError(f"--view must be one of {', '.join(VIEWS)} (got {view!r})")
@@ -65,7 +67,6 @@ def run(args) -> int:
     t0 = time.perf_counter()
     bar = Progress(f"turntable {desc.name}", "frame", args.quiet)
     if args.workers or args.scheduler:
-        from ..render.distributed import dask_client
         with dask_client(args.scheduler, args.workers) as client:
             render_turntable(plan, args.denoise, client, progress=bar)
     else:
@@ -77,9 +78,6 @@ def run(args) -> int:
     msg = (f"wrote {len(plan.todo)} frames to {out} ({width}x{height}, {spp} spp, {elapsed:.1f} s)"
            + (f"; {skipped} complete frames skipped" if skipped else ""))
     if args.mp4:
-        from ..imaging.colour import view_to_uint8
-        from ..imaging.exr import read_exr
-        from ..imaging.video import write_mp4
         mp4 = out / f"{desc.name}.mp4"
         write_mp4(mp4, (view_to_uint8(read_exr(p).rgb, view, s.exposure) for p in plan.paths), fps=args.fps)
         msg += f"; {mp4}"

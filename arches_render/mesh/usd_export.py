@@ -15,8 +15,9 @@ Stage layout (Z-up, metres: ``upAxis = Z``, ``metersPerUnit = 1``)::
 
 Instances of one mesh file become one ``PointInstancer`` (its transforms are
 decomposed into translation, rotation quaternion and scale): thousands of rocks
-or blocks cost one prototype. A ``[[rock_piles]]`` entry (generators.rocks)
-becomes one ``PointInstancer`` whose prototypes are the stones of its tile set. Terrain chunks come from
+or blocks cost one prototype. An item of a generator's scene table (a
+``[[rock_piles]]`` entry: the stones of its tile set as prototypes) becomes one
+``PointInstancer`` from its ``point_instancer()`` data. Terrain chunks come from
 :mod:`arches_render.mesh.chunks` with welded seams. The stage is written to a
 temporary file and renamed; ``.usd``/``.usdc`` are binary (crate), ``.usda`` text.
 
@@ -185,7 +186,7 @@ def write_usd_stage(path, chunks, desc=None, textures=None) -> Path:
                 _bind(prim, _material(stage, f"/World/Materials/{name}_baked", (1, 1, 1), textures[name]))
             elif field_mat is not None:
                 _bind(prim, field_mat)
-        if desc is not None and (desc.meshes or getattr(desc, "rock_piles", None)):
+        if desc is not None and (desc.meshes or any(desc.tables.values())):
             _instances(stage, desc, mats)
         stage.GetRootLayer().Save()
         del stage
@@ -220,30 +221,28 @@ def _instances(stage, desc, mats):
         inst.CreateOrientationsAttr(Vt.QuathArray([Gf.Quath(float(q[0]), Gf.Vec3h(*map(float, q[1:])))
                                                    for _, q, _ in parts]))
         inst.CreateScalesAttr(Vt.Vec3fArray([Gf.Vec3f(*map(float, s)) for _, _, s in parts]))
-    for j, pile in enumerate(getattr(desc, "rock_piles", ())):
-        _rock_pile(stage, f"/World/Instances/rock_pile_{j}", pile.instances(), mats.get(pile.material))
+    # The generators' scene tables (a rock pile: the stones of its tile set).
+    for items in desc.tables.values():
+        for item in items:
+            _point_instancer(stage, item.point_instancer(), mats.get(item.material))
 
 
-def _rock_pile(stage, base, inst, mat):
-    """A ``[[rock_piles]]`` entry as one PointInstancer: the stones of its tile set are the
-    prototypes, a rock is ``origin + (stone vertex + slot offset) * cell``."""
+def _point_instancer(stage, data, mat):
+    """One PointInstancer ``/World/Instances/<name>`` from a scene-table item's
+    ``point_instancer()`` data: ``name``, prototypes ``[(name, vertices, faces, normals)]``,
+    ``proto_index``, ``positions``, ``scales`` (``None``: nothing to write)."""
     from pxr import UsdGeom, Vt
-    if len(inst) == 0:
+    if data is None:
         return
-    st = inst.store
-    used, proto_index = np.unique(inst.ids, return_inverse=True)
+    base = f"/World/Instances/{data['name']}"
     pi = UsdGeom.PointInstancer.Define(stage, base)
     protos = []
-    for k, r in enumerate(used):
-        v = st.vertices[st.vstart[r]:st.vstart[r + 1]]
-        f = st.faces[st.fstart[r]:st.fstart[r + 1]]
-        n = st.normals[st.vstart[r]:st.vstart[r + 1]]
-        proto = _mesh_prim(stage, f"{base}/Prototypes/stone_{int(r)}", v, f, n)
+    for name, v, f, n in data["prototypes"]:
+        proto = _mesh_prim(stage, f"{base}/Prototypes/{name}", v, f, n)
         if mat is not None:
             _bind(proto, mat)
         protos.append(proto.GetPath())
     pi.CreatePrototypesRel().SetTargets(protos)
-    pi.CreateProtoIndicesAttr(Vt.IntArray.FromNumpy(proto_index.astype(np.int32).ravel()))
-    pos = np.asarray(inst.origin, np.float64) + np.asarray(inst.offsets, np.float64) * inst.cell
-    pi.CreatePositionsAttr(Vt.Vec3fArray.FromNumpy(pos.astype(np.float32)))
-    pi.CreateScalesAttr(Vt.Vec3fArray.FromNumpy(np.full((len(inst), 3), inst.cell, np.float32)))
+    pi.CreateProtoIndicesAttr(Vt.IntArray.FromNumpy(np.asarray(data["proto_index"], np.int32).ravel()))
+    pi.CreatePositionsAttr(Vt.Vec3fArray.FromNumpy(np.asarray(data["positions"], np.float32)))
+    pi.CreateScalesAttr(Vt.Vec3fArray.FromNumpy(np.asarray(data["scales"], np.float32)))

@@ -116,10 +116,11 @@ def build_scene(desc, geometry=None, width=None, height=None, voxel=None, progre
         d[f"light{i}"] = light
     for i, mesh in enumerate(desc.meshes):
         d[f"mesh{i}"] = dict(mesh, bsdf=bsdfs[mesh["bsdf"]["id"]])
-    # Rock piles: flat meshes with baked transforms, tiles built or loaded from their cache.
-    for j, pile in enumerate(getattr(desc, "rock_piles", ())):
-        for k, shape in enumerate(pile.shapes(bsdfs)):
-            d[f"rock_pile{j}_{k}"] = shape
+    # The generators' scene tables (rock piles: flat meshes with baked transforms).
+    for items in desc.tables.values():
+        for item in items:
+            for k, shape in enumerate(item.shapes(bsdfs)):
+                d[f"{item.name}_{k}"] = shape
     field_bsdf = bsdfs[desc.field_material] if desc.field is not None else None
     if geometry == "mesh" or desc.field is None:
         d["integrator"] = {"type": "implicit_path" if aovs else "path", "max_depth": s.max_depth,

@@ -17,11 +17,10 @@ A scene file is data, never code. Top-level tables:
 ``[[meshes]]``   ``file`` (PLY/OBJ) or ``shape`` (rectangle, disk, sphere, cube), a
                  transform (``translate``, ``rotate = {axis, angle}``, ``scale``), ``material``
 ``[field]``      ``root`` (node name or inline table), ``material``
-``[[rock_piles]]`` rocks of aperiodic corner-cube tiles (or the periodic Arches tile)
-                 on a support object: ``support`` (``"field"``, a node name, or
-                 ``{node}``/``{shape}``/``{mesh}``), ``extent``, ``rock_size``, ``n``,
-                 ``seed``, ``erosion``, ``material`` or ``preset`` (object space); see
-                 :mod:`arches_render.generators.rocks.scene_piles` for every key
+``[[NAME]]``     the top-level tables of the generators (``SCENE_TABLES`` in the
+                 registry, :mod:`arches_render.extensions`), e.g. ``[[rock_piles]]``
+                 of :mod:`arches_render.generators.rocks.scene_piles`; the parsed
+                 items are ``SceneDescription.tables[NAME]`` (also ``desc.NAME``)
 ``[nodes.NAME]`` field nodes (see :mod:`arches_render.scene.nodes`)
 
 Paths are relative to the scene file. Errors name the file, the key path and the
@@ -42,6 +41,7 @@ else:  # pragma: no cover
 
 import mitsuba as mi
 
+from .. import extensions
 from .errors import SceneError
 from .nodes import NodeBuilder
 from .validate import Table
@@ -88,7 +88,14 @@ class SceneDescription:
     meshes: list = dc_field(default_factory=list)       # Mitsuba shape dicts
     field: object = None                                # root Node or None
     field_material: str | None = None
-    rock_piles: list = dc_field(default_factory=list)   # generators.rocks RockPile objects
+    tables: dict = dc_field(default_factory=dict)       # generators' [[NAME]] -> parsed items
+
+    def __getattr__(self, name):
+        # A generator's scene table reads as an attribute: desc.rock_piles.
+        tables = self.__dict__.get("tables", {})
+        if name in tables:
+            return tables[name]
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
 
 def _sun_direction(t: Table):
@@ -296,20 +303,18 @@ def parse_scene(data: dict, path) -> SceneDescription:
             raise ft.error("root", "the field is unbounded (a plane or noise at the root): "
                                    "intersect it with a box")
         ft.finish()
-    rock_piles = []
-    pile_tables = root.tables("rock_piles")
-    if pile_tables:
-        from ..generators.rocks.scene_piles import parse_rock_pile
-        rock_piles = [parse_rock_pile(t, builder, field_node, materials, path, i)
-                      for i, t in enumerate(pile_tables)]
+    tables = {table: [parse(t, builder, field_node, materials, path, i)
+                      for i, t in enumerate(root.tables(table))]
+              for table, parse in extensions.scene_tables().items()}
     unused = sorted(set(nodes_tbl) - set(builder.built))
     if unused:
         raise SceneError(path, f"nodes.{unused[0]}", "is defined but used by neither field.root "
                                                      "nor a material mask")
-    if field_node is None and not meshes and not rock_piles:
-        raise root.error("field", "the scene has no geometry: add [field], [[meshes]] or [[rock_piles]]")
+    if field_node is None and not meshes and not any(tables.values()):
+        kinds = ["[field]", "[[meshes]]"] + [f"[[{table}]]" for table in tables]
+        raise root.error("field", f"the scene has no geometry: add {', '.join(kinds[:-1])} or {kinds[-1]}")
     root.finish()
     return SceneDescription(file=path, name=name, description=description, render=settings,
                             camera=camera, lights=lights, materials=materials,
                             material_masks=material_masks, meshes=meshes,
-                            field=field_node, field_material=field_material, rock_piles=rock_piles)
+                            field=field_node, field_material=field_material, tables=tables)

@@ -30,19 +30,21 @@ warp                   child + the noise keys (octaves = 3): domain warp
 capsule_set            file (.npz with a, b, radius) or inline a, [b = a], radius
 =====================  ==================================================================
 
-Generators add node types of their own: a module ``scene_nodes.py`` in a
-sub-package of ``generators/`` (for example ``generators/terrain/scene_nodes.py``)
-defines ``NODE_TYPES = {name: build(table, builder) -> Node}`` and documents its
-keys in the same kind of table; :func:`node_types` merges them with the ones above.
+Generators add node types of their own: a generator package declares
+``NODE_TYPES = {name: build(table, builder) -> Node}`` in the registry
+(:mod:`arches_render.extensions`; by convention built in its ``scene_nodes.py``,
+which documents the keys in the same kind of table); :func:`node_types` merges
+them with the ones above.
 """
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import numpy as np
 
-from .. import field as F
+from .. import extensions, field as F
 from ..field.heightmaps import DEMError, fbm_heightmap, read_dem
 from .errors import SceneError
 from .validate import Table
@@ -152,38 +154,14 @@ NODE_TYPES = {
 }
 
 
-def _extension_node_types() -> dict:
-    """``NODE_TYPES`` of every ``generators/*/scene_nodes.py``; a name defined twice is a bug."""
-    import importlib
-    import pkgutil
-
-    from .. import generators
-    found = {}
-    for pkg in sorted(pkgutil.iter_modules(generators.__path__), key=lambda m: m.name):
-        if not pkg.ispkg:
-            continue
-        try:
-            module = importlib.import_module(f"{generators.__name__}.{pkg.name}.scene_nodes")
-        except ModuleNotFoundError as exc:
-            if exc.name != f"{generators.__name__}.{pkg.name}.scene_nodes":
-                raise
-            continue
-        for name, build in module.NODE_TYPES.items():
-            if name in NODE_TYPES or name in found:
-                raise RuntimeError(f"node type {name!r} of {module.__name__} is already defined")
-            found[name] = build
-    return found
-
-
-_ALL_NODE_TYPES: dict | None = None
-
-
+@functools.cache
 def node_types() -> dict:
-    """All node types: the core ones of this module and those of the generators."""
-    global _ALL_NODE_TYPES
-    if _ALL_NODE_TYPES is None:
-        _ALL_NODE_TYPES = {**NODE_TYPES, **_extension_node_types()}
-    return _ALL_NODE_TYPES
+    """All node types: the core ones of this module and those of the generators.
+
+    The generators' come from the registry (:func:`arches_render.extensions.node_types`),
+    read once; a type defined twice raises.
+    """
+    return {**NODE_TYPES, **extensions.node_types(core=NODE_TYPES)}
 
 
 def _scale_factor(t: Table):

@@ -1,1 +1,16 @@
-"""Implicit blocks: fractured rock blocks replicated over a host field (implicit-blocks-2020)."""
+"""Implicit blocks (Paris et al. 2020, *Modeling rocky scenery using implicit blocks*).
+
+A periodic tile of fractured convex blocks (:mod:`.tile_cache`: Poisson samples,
+fracture discs of a structure type, clusters, hull planes) replicated over a host
+field (:mod:`.replication`, :mod:`.block_field`): the ``blocks`` node type
+(:mod:`.scene_nodes`) and the ``blocks`` command.
+"""
+
+__all__ = ["NODE_TYPES", "SCENE_TABLES", "COMMANDS", "BENCHMARKS"]
+
+from . import benchmarks, command
+from .scene_nodes import NODE_TYPES
+
+SCENE_TABLES: dict = {}
+COMMANDS = (command,)
+BENCHMARKS = benchmarks.BENCHMARKS

@@ -18,5 +18,16 @@ module              holds
 ``scenarios``       arch, drilling and cavern, seeded
 ``export``          a triangle mesh per volume with its material (PLY, glTF)
 ``checks``          volumes and self-intersection tests
+``command``         ``arches-render evolve``
+``benchmarks``      bytes per dart, events per second
 ==================  ==========================================================
 """
+
+__all__ = ["NODE_TYPES", "SCENE_TABLES", "COMMANDS", "BENCHMARKS"]
+
+from . import benchmarks, command
+
+NODE_TYPES: dict = {}
+SCENE_TABLES: dict = {}
+COMMANDS = (command,)
+BENCHMARKS = benchmarks.BENCHMARKS

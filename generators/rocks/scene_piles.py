@@ -52,8 +52,14 @@ __all__ = ["RockPile", "parse_rock_pile"]
 
 @dataclass
 class RockPile:
-    """A validated ``[[rock_piles]]`` entry; :meth:`shapes` builds its meshes (cached)."""
+    """A validated ``[[rock_piles]]`` entry; :meth:`shapes` builds its meshes (cached).
 
+    An item of a scene table (:mod:`arches_render.extensions`): :attr:`name` prefixes
+    the ids of its Mitsuba shapes, :meth:`shapes` renders it, :meth:`point_instancer`
+    exports it.
+    """
+
+    index: int
     params: TileParams
     support: object
     extent: tuple
@@ -64,6 +70,11 @@ class RockPile:
     cache_dir: Path
     stats: dict = dc_field(default_factory=dict)
     _buffers: list | None = None
+
+    @property
+    def name(self) -> str:
+        """``rock_pile<index>``: prefix of its shape ids (and of its preset material)."""
+        return f"rock_pile{self.index}"
 
     def instances(self, progress=None):
         """The selected rocks (:class:`.instancing.RockInstances`), building or loading tiles."""
@@ -89,6 +100,33 @@ class RockPile:
         """Mitsuba meshes of the pile with the pile's BSDF from ``bsdfs``."""
         from .mitsuba_meshes import rock_meshes_mitsuba
         return rock_meshes_mitsuba(self.buffers(progress), bsdfs[self.material])
+
+    def point_instancer(self) -> dict | None:
+        """The pile as instances of the stones of its tile set (for a USD PointInstancer).
+
+        A rock is ``origin + (stone vertex + slot offset) * cell``: the prototypes are
+        the stones used, in tile-cell units, placed at ``origin + offset * cell`` and
+        scaled by ``cell``.
+
+        Returns
+        -------
+        dict or None
+            ``name`` (of the prim, ``rock_pile_<index>``), ``prototypes``
+            ``[(name, vertices, faces, normals)]``, ``proto_index`` ``(K,)``,
+            ``positions`` ``(K, 3)`` and ``scales`` ``(K, 3)``; ``None`` when no rock is
+            kept.
+        """
+        inst = self.instances()
+        if len(inst) == 0:
+            return None
+        st = inst.store
+        used, proto_index = np.unique(inst.ids, return_inverse=True)
+        prototypes = [(f"stone_{int(r)}", st.vertices[st.vstart[r]:st.vstart[r + 1]],
+                       st.faces[st.fstart[r]:st.fstart[r + 1]], st.normals[st.vstart[r]:st.vstart[r + 1]])
+                      for r in used]
+        pos = np.asarray(inst.origin, np.float64) + np.asarray(inst.offsets, np.float64) * inst.cell
+        return dict(name=f"rock_pile_{self.index}", prototypes=prototypes, proto_index=proto_index.astype(np.int32).ravel(),
+                    positions=pos.astype(np.float32), scales=np.full((len(inst), 3), inst.cell, np.float32))
 
 
 def _interval(t, key, lo, hi):
@@ -225,10 +263,10 @@ def parse_rock_pile(t, builder, field_node, materials: dict, scene_file, index: 
         if not isinstance(over, dict):
             raise t.error("overrides", "must be a table")
         try:
-            materials[f"rock_pile{index}"] = presets.preset_dict(t.string("preset"), dict(over, space="object"))
+            material = f"rock_pile{index}"
+            materials[material] = presets.preset_dict(t.string("preset"), dict(over, space="object"))
         except ValueError as exc:
             raise t.error("overrides" if over else "preset", str(exc)) from None
-        material = f"rock_pile{index}"
     else:
         material = t.string("material", "default")
         if material not in materials:
@@ -236,7 +274,8 @@ def parse_rock_pile(t, builder, field_node, materials: dict, scene_file, index: 
     from .tile_cache import cache_dir
     t.finish()
     try:
-        return RockPile(params=params, support=support, extent=(lo, hi), rock_size=rock_size, offset=offset,
+        return RockPile(index=index, params=params, support=support, extent=(lo, hi),
+                        rock_size=rock_size, offset=offset,
                         min_inside=min_inside, material=material, cache_dir=cache_dir(scene_file))
     except ValueError as exc:  # pragma: no cover - every value is range-checked above
         raise SceneError(scene_file, t.path, str(exc)) from None

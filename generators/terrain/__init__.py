@@ -1,1 +1,17 @@
-"""Terrain generators (heightmaps now; terrain amplification builds here next)."""
+"""Terrain amplification (Paris et al. 2019, *Terrain amplification with implicit 3D features*).
+
+A DEM becomes an implicit heightfield; a geology (resistance) tree and erosion
+processes (sea, river, karst, hoodoos, strata) add caves, arches and overhangs as
+skeletal primitive sets; :mod:`.banded` polygonizes such trees in a band around
+the surface (Sec. 7). Entry point: :func:`.amplify.amplify` (the presets); the ``amplify`` command;
+node types in :mod:`.scene_nodes`.
+"""
+
+__all__ = ["NODE_TYPES", "SCENE_TABLES", "COMMANDS", "BENCHMARKS"]
+
+from . import benchmarks, command
+from .scene_nodes import NODE_TYPES
+
+SCENE_TABLES: dict = {}
+COMMANDS = (command,)
+BENCHMARKS = benchmarks.BENCHMARKS

@@ -1,6 +1,6 @@
 """``arches-render evolve SCENARIO -o OUT``: topological terrain evolution on 3-G-maps.
 
-Runs one of the seeded scenarios of :mod:`arches_render.generators.gmaps.scenarios`
+Runs one of the seeded scenarios of :mod:`.scenarios`
 (``arch``, ``drilling``, ``cavern``; Bezin et al., *Topological Operations for
 Geomorphological Evolution*) and writes triangulated meshes, one per volume with
 its material:
@@ -20,11 +20,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from . import Progress, UsageError, bounded_int
+from arches_render.commands import Progress, UsageError, bounded_int
+
+from . import scenarios
+from .export import write_gltf, write_ply_folder
+from .scenarios import SCENARIOS
 
 
 def register(subparsers):
-    from ..generators.gmaps.scenarios import SCENARIOS
     p = subparsers.add_parser(
         "evolve", help="run a 3-G-map terrain evolution scenario and write a mesh per volume",
         description="Evolve a terrain of material volumes stored in a 3-generalized map under vertex "
@@ -44,7 +47,6 @@ def register(subparsers):
 
 
 def _writer(out: Path):
-    from ..generators.gmaps.export import write_gltf, write_ply_folder
     if out.suffix.lower() in (".glb", ".gltf"):
         return lambda g, mats, meta, path=out: write_gltf(g, path, mats)
     if out.suffix:
@@ -53,7 +55,6 @@ def _writer(out: Path):
 
 
 def run(args) -> int:
-    from ..generators.gmaps import scenarios
     out = Path(args.output)
     write = _writer(out)
     if out.suffix and not out.parent.exists():

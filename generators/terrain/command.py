@@ -2,7 +2,7 @@
 
 Reads a DEM (``.npy``, 16-bit ``.png``, GeoTIFF ``.tif``; see
 :mod:`arches_render.field.heightmaps`), builds the construction tree of a
-preset (:mod:`arches_render.generators.terrain.amplify`) and writes a scene that
+preset (:mod:`.amplify`) and writes a scene that
 renders as it is: the ``[nodes.*]`` of the tree, the heights (``.npy``) and the
 primitive arrays (``.npz``) beside it (or under ``--data-dir``), a camera framed on
 the terrain, sun and sky, and the triplanar ``terrain`` material fitted to the
@@ -23,14 +23,18 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from . import Progress, UsageError, bounded_int, positive_float
+from arches_render.atomic import atomic_write
+from arches_render.commands import Progress, UsageError, bounded_int, positive_float
+from arches_render.field.heightmaps import DEMError, read_dem
+
+from .amplify import PRESETS, amplify
+from .scene_writer import frame_camera, landscape_material, sun_for, toml_text
 
 #: Default largest DEM processed (cells); larger ones are averaged down.
 MAX_CELLS = 1024 * 1024
 
 
 def register(subparsers):
-    from ..generators.terrain.amplify import PRESETS
     p = subparsers.add_parser(
         "amplify", help="amplify a DEM (.npy, 16-bit .png, .tif) into a volumetric terrain scene",
         description="Build the construction tree of a terrain-amplification preset from a DEM and "
@@ -55,7 +59,6 @@ def register(subparsers):
 
 
 def _scene_doc(result, name):
-    from ..generators.terrain.scene_writer import frame_camera, landscape_material, sun_for
     H, extent = result.heights, result.extent
     base = min(float(n.bounds()[0][2]) for n in result.root.walk() if n.kind == "implicit_heightfield")
     zlo, zhi = float(H.min()), float(H.max())
@@ -86,11 +89,6 @@ def _scene_doc(result, name):
 
 
 def run(args) -> int:
-    from ..atomic import atomic_write
-    from ..generators.terrain.amplify import amplify
-    from ..field.heightmaps import DEMError, read_dem
-    from ..generators.terrain.scene_writer import toml_text
-
     out = Path(args.output)
     if out.suffix.lower() != ".toml":
         raise UsageError(f"-o {out}: the scene file must end in .toml")

@@ -2,25 +2,24 @@
 
 The tiles of ``[[rock_piles]]`` entry ``--pile`` (default 0) are taken from the
 tile cache or built and cached (see
-:mod:`arches_render.generators.rocks.tile_cache`), then written to ``TILES.npz``
+:mod:`.tile_cache`), then written to ``TILES.npz``
 (:class:`~arches_render.generators.rocks.rock_store.RockStore` arrays). A later
 render of the scene reuses the cache.
 """
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
-from . import Progress, UsageError, bounded_int
+from arches_render.atomic import atomic_path
+from arches_render.commands import Progress, UsageError, bounded_int
+from arches_render.scene import load_scene
+
+from .tile_cache import cache_key, load_or_build
 
 
 def cmd_rocks(args) -> int:
-    import time
-
-    from ..atomic import atomic_path
-    from ..generators.rocks.tile_cache import cache_key, load_or_build
-    from ..scene import load_scene
-
     out = Path(args.output)
     if out.suffix.lower() != ".npz":
         raise UsageError(f"-o/--output must end in .npz (got {out})")

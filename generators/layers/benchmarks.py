@@ -20,19 +20,21 @@
 from __future__ import annotations
 
 import statistics
-import sys
 import time
-from pathlib import Path
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
+from scipy.ndimage import gaussian_filter
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+from arches_render.timing import random_points, timed_eval
+
+from .convolution_surface import ConvolutionSurface
+from .material_stacks import AIR, BEDROCK, ROCK, SAND, SANDSTONE, MaterialStacks
+from .stabilization import slope_excess, stabilize
 
 
 def _smooth_noise(shape, scale, seed):
-    from scipy.ndimage import gaussian_filter
     rng = np.random.default_rng(seed)
     f = gaussian_filter(rng.normal(size=shape), scale, mode="wrap")
     return f / f.std()
@@ -44,7 +46,6 @@ def cave_terrain(nx, ny, nz, seed=0, relief=None):
     Columns bottom-up: bedrock, [air, bedrock], [air, bedrock], sandstone, sand; built as
     a count matrix and folded where a cave is absent (vectorized, no Python per column).
     """
-    from arches_render.generators.layers.material_stacks import AIR, BEDROCK, SAND, SANDSTONE, MaterialStacks
     H = (0.55 + 0.2 * _smooth_noise((ny, nx), max(nx, ny) / 16, seed)
          + 0.05 * _smooth_noise((ny, nx), max(nx, ny) / 64, seed + 1))
     H = np.clip(H, 0.1, 0.95)
@@ -98,9 +99,7 @@ def bench_layers_memory_bytes(repeat):
 
 
 def bench_layers_field_evals(repeat):
-    from timing import random_points, timed_eval
 
-    from arches_render.generators.layers.convolution_surface import ConvolutionSurface
     S = cave_terrain(512, 512, 4000, seed=2)
     S = type(S)((S.ny, S.nx), 0.5, (0.0, 0.0, 0.0), 0.05, S.n_levels, S.offsets, S.material, S.count)
     node = ConvolutionSurface(S)
@@ -124,8 +123,6 @@ def bench_layers_field_evals(repeat):
 
 
 def bench_layers_stabilize_s(repeat):
-    from arches_render.generators.layers.material_stacks import ROCK, SAND, MaterialStacks
-    from arches_render.generators.layers.stabilization import slope_excess, stabilize
 
     def grid(n, seed):
         H = 20.0 + 4.0 * _smooth_noise((n, n), n / 16, seed)

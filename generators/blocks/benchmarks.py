@@ -24,14 +24,19 @@ import time
 
 import mitsuba as mi
 import numpy as np
-from timing import random_points, timed_eval  # noqa: E402  (benchmarks/ is on sys.path)
+
+from arches_render import field as F
+from arches_render.timing import random_points, timed_eval
+
+from .block_field import BlockField
+from .replication import replicate
+from .tile_cache import TileParams, build_tile
 
 STRUCTURES = ("equidimensional", "rhombohedral", "polyhedral", "tabular", "columnar", "prismatic")
 PAPER_S = {"equidimensional": 6.9, "rhombohedral": 12.0, "polyhedral": 25.4, "tabular": 16.3}
 
 
 def _tile(structure, seed=1):
-    from arches_render.generators.blocks.tile_cache import TileParams, build_tile
     return build_tile(TileParams(structure=structure, size=20.0, point_radius=0.7, seed=seed))
 
 
@@ -54,7 +59,6 @@ def bench_blocks_tile_s(repeat):
 
 
 def bench_blocks_tile_bytes(repeat):
-    from arches_render.generators.blocks.block_field import BlockField
     sizes, extra = {}, {}
     for st in STRUCTURES:
         tile = _tile(st)
@@ -67,8 +71,6 @@ def bench_blocks_tile_bytes(repeat):
 
 
 def _terrain():
-    from arches_render import field as F
-    from arches_render.generators.blocks.replication import replicate
     x = np.linspace(-60, 60, 241)
     X, Y = np.meshgrid(x, x)
     # A 20 m escarpment (steep where |x - 5 sin(y/15)| < 3) on gentle ground.

@@ -1,6 +1,6 @@
 """``arches-render layers SCENE -o STACKS.npz``: build a scene's layered terrain and save its stacks.
 
-The ``layers`` node of the scene (see :mod:`arches_render.generators.layers.scene_nodes`)
+The ``layers`` node of the scene (see :mod:`.scene_nodes`)
 is built from its source and its list of operations is applied in order (with a
 progress bar over the operations); the edited material stacks are written
 atomically to an ``.npz`` file, which a scene can load back with
@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from . import Progress, UsageError
+from arches_render.commands import Progress, UsageError
 
 
 def cmd_layers(args) -> int:
@@ -21,9 +21,9 @@ def cmd_layers(args) -> int:
         import tomllib
     else:  # pragma: no cover
         import tomli as tomllib
-    from ..scene.errors import SceneError
-    from ..scene.nodes import NodeBuilder
-    from ..scene.validate import Table
+    from arches_render.scene.errors import SceneError
+    from arches_render.scene.nodes import NodeBuilder
+    from arches_render.scene.validate import Table
 
     scene = Path(args.scene)
     out = Path(args.output)
@@ -53,9 +53,9 @@ def cmd_layers(args) -> int:
     else:
         name = args.node
 
-    from ..backend import set_variant
+    from arches_render.backend import set_variant
     set_variant()
-    from ..generators.layers.scene_nodes import build_stacks
+    from .scene_nodes import build_stacks
 
     builder = NodeBuilder(nodes, scene, scene.parent)
     bar = Progress(f"layers {name}", "op", args.quiet)

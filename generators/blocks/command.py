@@ -3,7 +3,7 @@
 The ``blocks`` node ``--node`` (default: the only, or first in name order, node of
 type ``blocks`` under ``[nodes]``) gives the tile parameters (structure, tile size,
 spacing, orientation, seed, ...); the tile is taken from the cache or built and
-cached (:mod:`arches_render.generators.blocks.tile_cache`), then written to
+cached (:mod:`.tile_cache`), then written to
 ``TILE.npz``. A scene can use the file directly with ``tile = "TILE.npz"`` in its
 ``blocks`` node.
 """
@@ -12,14 +12,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from . import Progress, UsageError
+from arches_render.commands import Progress, UsageError
 
 
 def _blocks_table(path: Path, name: str | None):
     import tomllib
 
-    from ..scene import SceneError
-    from ..scene.validate import Table
+    from arches_render.scene import SceneError
+    from arches_render.scene.validate import Table
     try:
         data = tomllib.loads(path.read_text())
     except OSError as exc:
@@ -43,8 +43,8 @@ def _blocks_table(path: Path, name: str | None):
 def cmd_blocks(args) -> int:
     import time
 
-    from ..generators.blocks.scene_nodes import tile_params
-    from ..generators.blocks.tile_cache import cache_dir, cached_tile, save_tile
+    from .scene_nodes import tile_params
+    from .tile_cache import cache_dir, cached_tile, save_tile
 
     out = Path(args.output)
     if out.suffix.lower() != ".npz":

@@ -1,14 +1,23 @@
-"""Timing helpers shared by the benchmark modules (``run.py`` and ``bench_*.py``)."""
+"""Helpers shared by the benchmarks: ``benchmarks/run.py`` and each generator's ``benchmarks.py``.
+
+Benchmarks run from a checkout of the repository (``python benchmarks/run.py``),
+since several render its scene files or start its CLI: :data:`REPO` is that
+checkout (the package is installed in editable mode).
+"""
 
 from __future__ import annotations
 
+import resource
 import statistics
 import time
+from pathlib import Path
 
-import arches_render  # noqa: F401  (first: it chooses the libLLVM that Dr.Jit loads)
 import drjit as dr
 import mitsuba as mi
 import numpy as np
+
+#: The repository root (scenes/, benchmarks/), working folder of benchmark subprocesses.
+REPO = Path(__file__).resolve().parents[1]
 
 
 def timed_eval(fn, points, repeat):
@@ -30,3 +39,9 @@ def random_points(n, lo, hi, seed=0):
     """``n`` uniform random points in the box [lo, hi] as an ``mi.Point3f``."""
     pts = np.random.default_rng(seed).uniform(lo, hi, (n, 3)).astype(np.float32)
     return mi.Point3f(*(mi.Float(pts[:, i]) for i in range(3)))
+
+
+def cpu_seconds() -> float:
+    """CPU seconds of this process and its reaped children (e.g. a build's worker processes)."""
+    a, b = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return a.ru_utime + a.ru_stime + b.ru_utime + b.ru_stime

@@ -24,9 +24,10 @@ from __future__ import annotations
 import statistics
 import time
 
+from . import events, scenarios
+
 
 def _arch():
-    from arches_render.generators.gmaps import scenarios
     res = scenarios.run("arch", seed=0, check=False)
     res.gmap.compact()
     return res
@@ -45,7 +46,6 @@ def bench_arch_bytes(repeat):
 
 
 def _drill_rate(check):
-    from arches_render.generators.gmaps import events, scenarios
     popped = {"n": 0}
     orig = events.EventQueue._apply
 

@@ -24,33 +24,26 @@ import tempfile
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
+from arches_render.timing import REPO, cpu_seconds
+
+from .aperiodic_tiles import build_aperiodic_tiles, build_region
+from .periodic_tile import build_periodic_tile
+from .tile_params import TileParams
 
 
 def _warm_kernels():
-    from arches_render.generators.rocks import aperiodic_tiles as at
-    from arches_render.generators.rocks.tile_params import TileParams
-    at.build_region(7, 0, TileParams(n=4), 0)
-
-
-def _cpu_seconds():
-    """CPU seconds of this process and its reaped children (the build's worker processes)."""
-    import resource
-    a, b = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
-    return a.ru_utime + a.ru_stime + b.ru_utime + b.ru_stime
+    build_region(7, 0, TileParams(n=4), 0)
 
 
 def _bench_tiles(n, goal, paper_stones, paper_s, repeat):
-    from arches_render.generators.rocks.aperiodic_tiles import build_aperiodic_tiles
-    from arches_render.generators.rocks.tile_params import TileParams
     _warm_kernels()
     times, cpus, store = [], [], None
     for _ in range(repeat):
-        c, t = _cpu_seconds(), time.perf_counter()
+        c, t = cpu_seconds(), time.perf_counter()
         store = build_aperiodic_tiles(TileParams(n=n), workers=2)
         times.append(time.perf_counter() - t)
         # Forkserver workers are not our children: they report their own CPU time.
-        cpus.append(_cpu_seconds() - c + store.meta["worker_cpu_seconds"])
+        cpus.append(cpu_seconds() - c + store.meta["worker_cpu_seconds"])
     # cpu_s / 2 is what two idle cores would take; the wall time includes other users' load.
     return dict(value=statistics.median(times), unit="s", baseline=goal, baseline_is="goal",
                 cpu_s=statistics.median(cpus), stones=len(store), triangles=int(store.meta["triangles"]),
@@ -139,16 +132,14 @@ def bench_instances_5000(repeat):
 
 
 def bench_periodic_tile(repeat):
-    from arches_render.generators.rocks.periodic_tile import build_periodic_tile
-    from arches_render.generators.rocks.tile_params import TileParams
     params = TileParams(tiling="periodic")
     build_periodic_tile(TileParams(tiling="periodic", periodic_voxels=24, poisson_radius=0.2))  # compile
     times, cpus, store = [], [], None
     for _ in range(repeat):
-        c, t = _cpu_seconds(), time.perf_counter()
+        c, t = cpu_seconds(), time.perf_counter()
         store = build_periodic_tile(params)
         times.append(time.perf_counter() - t)
-        cpus.append(_cpu_seconds() - c)
+        cpus.append(cpu_seconds() - c)
     return dict(value=statistics.median(times), unit="s", baseline=4.0, baseline_is="goal",
                 cpu_s=statistics.median(cpus), rocks=len(store), paper_s="19-44", paper_rocks="50-70",
                 voxels=params.periodic_voxels, load_avg_1min=os.getloadavg()[0])

@@ -1,0 +1,103 @@
+"""The one registry of generator packages: what each paper's code adds to arches-render.
+
+As Mitsuba's package ``__init__`` names its submodules and trimesh's
+``exchange/load.py`` names its loaders, :data:`GENERATORS` names every generator
+package; nothing scans folders. The scene loader, the CLI and ``benchmarks/run.py``
+iterate this registry, and the core names no generator anywhere else.
+
+A generator package ``arches_render.generators.NAME`` (folder ``generators/NAME/``)
+declares in its ``__init__.py``:
+
+``NODE_TYPES``     ``{type: build(table, builder) -> Node}``: node types of ``[nodes.*]``
+                   tables. ``table`` is a :class:`~arches_render.scene.validate.Table`,
+                   ``builder`` the scene's :class:`~arches_render.scene.nodes.NodeBuilder`
+                   (operands, base folder, progress).
+``SCENE_TABLES``   ``{name: parse(table, builder, field, materials, file, index) -> item}``:
+                   top-level arrays of tables (``[[rock_piles]]``). ``field`` is the
+                   scene's root node or ``None``, ``materials`` the scene's material
+                   dicts (``parse`` may add one). An item renders as
+                   ``item.shapes(bsdfs, progress=None)`` (Mitsuba shapes) and exports to
+                   USD as ``item.point_instancer()`` (see
+                   :func:`arches_render.mesh.usd_export.write_usd_stage`).
+``COMMANDS``       modules defining ``register(subparsers)``: ``arches-render``
+                   subcommands (see :mod:`arches_render.commands`).
+``BENCHMARKS``     ``{name: (fn(repeat) -> dict, default repeat)}``: figures of
+                   ``benchmarks/run.py``.
+
+A name defined twice (a node type, a table, a benchmark) is a bug and raises.
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib
+from dataclasses import dataclass
+from types import ModuleType
+
+__all__ = ["GENERATORS", "Extension", "extensions", "node_types", "scene_tables", "commands", "benchmarks"]
+
+#: The generator packages, one per paper (see :mod:`arches_render.generators`).
+GENERATORS = ("terrain", "rocks", "blocks", "layers", "gmaps")
+
+
+@dataclass(frozen=True)
+class Extension:
+    """What one generator package declares (see the module docstring)."""
+
+    name: str
+    module: ModuleType
+    node_types: dict
+    scene_tables: dict
+    commands: tuple
+    benchmarks: dict
+
+
+@functools.cache
+def extensions() -> tuple[Extension, ...]:
+    """The generator packages of :data:`GENERATORS`, imported once, in that order.
+
+    Returns
+    -------
+    tuple of Extension
+    """
+    found = []
+    for name in GENERATORS:
+        module = importlib.import_module(f"arches_render.generators.{name}")
+        found.append(Extension(name=name, module=module,
+                               node_types=dict(getattr(module, "NODE_TYPES", {})),
+                               scene_tables=dict(getattr(module, "SCENE_TABLES", {})),
+                               commands=tuple(getattr(module, "COMMANDS", ())),
+                               benchmarks=dict(getattr(module, "BENCHMARKS", {}))))
+    return tuple(found)
+
+
+def _merged(kind: str, taken=()) -> dict:
+    """``{name: value}`` of one declaration over every extension; duplicates raise."""
+    out = {}
+    for ext in extensions():
+        for name, value in getattr(ext, kind).items():
+            if name in out or name in taken:
+                raise RuntimeError(f"{kind[:-1].replace('_', ' ')} {name!r} of generators.{ext.name} "
+                                   "is already defined")
+            out[name] = value
+    return out
+
+
+def node_types(core=()) -> dict:
+    """Node types of every generator; ``core`` names those the scene loader defines itself."""
+    return _merged("node_types", core)
+
+
+def scene_tables() -> dict:
+    """Top-level scene tables of every generator, e.g. ``{'rock_piles': parse_rock_pile}``."""
+    return _merged("scene_tables")
+
+
+def commands() -> list:
+    """Command modules of every generator, in registry order."""
+    return [m for ext in extensions() for m in ext.commands]
+
+
+def benchmarks(core=()) -> dict:
+    """Benchmarks of every generator; ``core`` names those ``benchmarks/run.py`` defines itself."""
+    return _merged("benchmarks", core)
