@@ -35,7 +35,6 @@ Jakob, W. et al. (2022). Mitsuba 3 renderer, ``mi.traverse`` / ``SceneParameters
 from __future__ import annotations
 
 import copy
-import sys
 from pathlib import Path
 
 import drjit as dr
@@ -50,12 +49,8 @@ from .imaging.preview import write_png
 from .render.jobs import set_camera
 from .render.output import render_header, write_render
 from .render.renderer import build_scene, load_materials, render_layers
-from .scene import SceneError, parse_scene
+from .scene import parse_scene, read_toml
 
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
 
 __all__ = ["Lookdev", "load", "compare"]
 
@@ -133,11 +128,7 @@ class Lookdev:
     def __init__(self, path, resolution=None, spp=None, seed=None):
         set_variant()
         self.path = Path(path)
-        try:
-            with open(self.path, "rb") as f:
-                self.data = tomllib.load(f)
-        except (OSError, tomllib.TOMLDecodeError) as exc:
-            raise SceneError(self.path, "", f"cannot read: {exc}") from None
+        self.data = read_toml(self.path)
         self._parse = parse_scene
         self.desc = parse_scene(copy.deepcopy(self.data), self.path)
         self.width, self.height = resolution or (self.desc.render.width, self.desc.render.height)

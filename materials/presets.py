@@ -9,15 +9,10 @@ by its ``name``: ``{'snow.height_min': 40.0}`` or ``{'snow': {'height_min': 40.0
 from __future__ import annotations
 
 import dataclasses
-import sys
 from pathlib import Path
 
+from .. import tomlfile
 from .triplanar import Layer, triplanar_dict
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
 
 __all__ = ["PRESET_DIR", "list_presets", "preset_layers", "preset_dict"]
 
@@ -42,8 +37,7 @@ def _read(name: str) -> dict:
     if name not in names:
         raise ValueError(f"unknown material preset '{name}'; allowed: {', '.join(names)}")
     path = PRESET_DIR / f"{name}.toml"
-    with open(path, "rb") as f:
-        data = tomllib.load(f)
+    data = tomlfile.load(path)
     extra = sorted(set(data) - {"description", "layer", *_OPTIONS})
     if extra:
         raise ValueError(f"{path}: unknown key '{extra[0]}'; allowed: description, layer, "

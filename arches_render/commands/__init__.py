@@ -19,8 +19,12 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from tqdm import tqdm
+
+from ..scene import SceneError
+from ..scene.validate import Table
 
 
 class UsageError(ValueError):
@@ -78,3 +82,63 @@ class Progress:
 
     def close(self):
         self.bar.close()
+
+
+def output_file(text: str, suffix: str) -> Path:
+    """The ``-o/--output`` path, which must end in ``suffix`` (e.g. ``'.npz'``).
+
+    Raises
+    ------
+    UsageError
+        ``-o/--output must end in SUFFIX (got ...)``.
+    """
+    out = Path(text)
+    if out.suffix.lower() != suffix:
+        raise UsageError(f"-o/--output must end in {suffix} (got {out})")
+    return out
+
+
+def find_node(data: dict, file, kind: str, name: str | None = None) -> tuple[str, Table]:
+    """The ``[nodes.NAME]`` table of type ``kind`` that a command works on (``--node``).
+
+    One lookup for every command that reads a node of a scene file, so that the
+    same mistake gives the same message.
+
+    Parameters
+    ----------
+    data : dict
+        The scene's TOML data (:func:`arches_render.scene.read_toml`).
+    file : str or Path
+        The scene file, for messages.
+    kind : str
+        Node type, e.g. ``'blocks'``.
+    name : str, optional
+        The node's name (``--node``); default the only node of that type.
+
+    Returns
+    -------
+    (str, Table)
+        The name and the node's table (its ``type`` already read).
+
+    Raises
+    ------
+    SceneError
+        When ``[nodes]`` is not a table or holds no node of type ``kind``.
+    UsageError
+        When ``name`` is none of them, or it is omitted and there are several.
+    """
+    nodes = data.get("nodes", {})
+    if not isinstance(nodes, dict):
+        raise SceneError(file, "nodes", "must be a table of named node tables")
+    names = sorted(n for n, t in nodes.items() if isinstance(t, dict) and t.get("type") == kind)
+    if not names:
+        raise SceneError(file, "nodes", f"has no node of type {kind}")
+    if name is None:
+        if len(names) > 1:
+            raise UsageError(f"{file} has several {kind} nodes ({', '.join(names)}): choose one with --node")
+        name = names[0]
+    elif name not in names:
+        raise UsageError(f"--node must name a {kind} node of {file} ({', '.join(names)}; got {name!r})")
+    table = Table(nodes[name], file, f"nodes.{name}")
+    table.string("type")
+    return name, table

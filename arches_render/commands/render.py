@@ -20,7 +20,7 @@ from ..render.jobs import RenderJob, prime_cache, run_job
 from ..render.output import render_header, write_render
 from ..render.renderer import build_scene
 from ..scene import load_scene
-from . import Progress, UsageError, bounded_int, positive_float, resolution
+from . import Progress, UsageError, bounded_int, output_file, positive_float, resolution
 
 
 def register(subparsers) -> None:
@@ -51,9 +51,7 @@ def register(subparsers) -> None:
 
 def run(args) -> int:
     desc = load_scene(args.scene)
-    out = Path(args.output) if args.output else Path("out") / f"{Path(args.scene).stem}.exr"
-    if out.suffix.lower() != ".exr":
-        raise UsageError(f"-o/--output must end in .exr (got {out})")
+    out = output_file(args.output, ".exr") if args.output else Path("out") / f"{Path(args.scene).stem}.exr"
     view = args.view or "srgb"
     if view not in VIEWS:
         raise UsageError(f"--view must be one of {', '.join(VIEWS)} (got {view!r})")

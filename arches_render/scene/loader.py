@@ -30,18 +30,12 @@ allowed range (:class:`~arches_render.scene.errors.SceneError`).
 from __future__ import annotations
 
 import math
-import sys
 from dataclasses import dataclass, field as dc_field
 from pathlib import Path
 
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
-
 import mitsuba as mi
 
-from .. import extensions
+from .. import extensions, tomlfile
 from .errors import SceneError
 from .nodes import NodeBuilder
 from .validate import Table
@@ -199,6 +193,33 @@ def _mesh(t: Table, base_dir: Path, materials: dict) -> dict:
     return d
 
 
+def read_toml(path) -> dict:
+    """The TOML data of a scene file, unvalidated.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    dict
+
+    Raises
+    ------
+    SceneError
+        ``no such scene file``, ``not valid TOML: ...`` or ``cannot read: ...``.
+    """
+    path = Path(path)
+    try:
+        return tomlfile.load(path)
+    except FileNotFoundError:
+        raise SceneError(path, "", "no such scene file") from None
+    except tomlfile.TOMLDecodeError as exc:
+        raise SceneError(path, "", f"not valid TOML: {exc}") from None
+    except OSError as exc:
+        raise SceneError(path, "", f"cannot read: {exc.strerror}") from None
+
+
 def load_scene(path) -> SceneDescription:
     """Read and validate a scene file.
 
@@ -216,17 +237,7 @@ def load_scene(path) -> SceneDescription:
     SceneError
         On unreadable files or invalid values (message names file, key, range).
     """
-    path = Path(path)
-    try:
-        with open(path, "rb") as f:
-            data = tomllib.load(f)
-    except FileNotFoundError:
-        raise SceneError(path, "", "no such scene file") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError(path, "", f"not valid TOML: {exc}") from None
-    except OSError as exc:
-        raise SceneError(path, "", f"cannot read: {exc.strerror}") from None
-    return parse_scene(data, path)
+    return parse_scene(read_toml(path), path)
 
 
 def parse_scene(data: dict, path) -> SceneDescription:

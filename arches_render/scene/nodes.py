@@ -172,12 +172,29 @@ def _scale_factor(t: Table):
 
 
 class NodeBuilder:
-    """Resolves node names and inline tables into field nodes, once each."""
+    """Resolves node names and inline tables into field nodes, once each.
 
-    def __init__(self, nodes_table: dict, file, base_dir: Path):
+    The context a node type's ``build(table, builder)`` receives (the scene-plugin
+    API of the generators).
+
+    Parameters
+    ----------
+    nodes_table : dict
+        The ``[nodes]`` tables by name.
+    file : str or Path
+        The scene file, for messages.
+    base_dir : Path
+        Folder that relative paths of the tables start from.
+    progress : callable, optional
+        ``progress(done, total)`` for a long build step of a node (a command's bar);
+        node types that report progress call it, others ignore it.
+    """
+
+    def __init__(self, nodes_table: dict, file, base_dir: Path, progress=None):
         self.defs = nodes_table or {}
         self.file = file
         self.base_dir = base_dir
+        self.progress = progress
         self.built: dict[str, F.Node] = {}
         self.stack: list[str] = []
 

@@ -98,7 +98,7 @@ def _range(t, key, default):
 def _blocks(t, ctx):
     from .replication import replicate
     host = ctx.build(t.raw("host"), t, "host")
-    tile = tile_from_table(t, ctx.base_dir)
+    tile = tile_from_table(t, ctx.base_dir, ctx.progress)
     if t.has("tile"):
         t.integer("seed", 0, lo=0, hi=2 ** 31 - 1)
     if t.has("region"):

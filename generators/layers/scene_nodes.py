@@ -235,7 +235,7 @@ def build_stacks(t: Table, ctx):
             angles[MATERIALS[name]] = at.number(name, angles[MATERIALS[name]], lo=1.0, hi=89.0)
         at.finish()
     ops = [_operation(o) for o in t.tables("operations")]
-    progress = getattr(ctx, "layers_progress", None)
+    progress = ctx.progress
     for k, op in enumerate(ops):
         try:
             stacks, _ = apply_operations(stacks, [op], seed=seed + k, angles=angles, sigma=sig)

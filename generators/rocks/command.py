@@ -10,19 +10,28 @@ render of the scene reuses the cache.
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 from arches_render.atomic import atomic_path
-from arches_render.commands import Progress, UsageError, bounded_int
+from arches_render.commands import Progress, UsageError, bounded_int, output_file
 from arches_render.scene import load_scene
 
 from .tile_cache import cache_key, load_or_build
 
 
-def cmd_rocks(args) -> int:
-    out = Path(args.output)
-    if out.suffix.lower() != ".npz":
-        raise UsageError(f"-o/--output must end in .npz (got {out})")
+def register(subparsers) -> None:
+    p = subparsers.add_parser("rocks", help="build and cache the rock tiles of a scene's [[rock_piles]]")
+    p.add_argument("scene", help="scene file (.toml)")
+    p.add_argument("-o", "--output", required=True, help="output tile file (.npz)")
+    p.add_argument("--pile", type=bounded_int("--pile", 0, 1023), default=0,
+                   help="index of the [[rock_piles]] entry (default 0)")
+    p.add_argument("--workers", type=bounded_int("--workers", 1, 64), default=None,
+                   help="build processes (default: CPU count)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    out = output_file(args.output, ".npz")
     desc = load_scene(args.scene)
     piles = desc.rock_piles
     if not piles:
@@ -43,15 +52,3 @@ def cmd_rocks(args) -> int:
     print(f"wrote {out} ({len(store)} stones, {int(store.meta['triangles'])} triangles, "
           f"{pile.params.tiling}, {what} in {elapsed:.1f} s; cache key {cache_key(pile.params)})")
     return 0
-
-
-def register(subparsers) -> None:
-    p = subparsers.add_parser("rocks", help="build and cache the rock tiles of a scene's [[rock_piles]]")
-    p.add_argument("scene", help="scene file (.toml)")
-    p.add_argument("-o", "--output", required=True, help="output tile file (.npz)")
-    p.add_argument("--pile", type=bounded_int("--pile", 0, 1023), default=0,
-                   help="index of the [[rock_piles]] entry (default 0)")
-    p.add_argument("--workers", type=bounded_int("--workers", 1, 64), default=None,
-                   help="build processes (default: CPU count)")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(func=cmd_rocks)
