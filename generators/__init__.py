@@ -8,7 +8,7 @@ Each declares its scene node types, scene tables, commands and benchmarks in its
 ==========================================  ===========  ====================================
 paper (``shared/papers/``)                  package      entry module (read first)
 ==========================================  ===========  ====================================
-Paris et al. 2019, *Terrain amplification   ``terrain``  ``amplify`` (pipeline, presets),  
+Paris et al. 2019, *Terrain amplification   ``terrain``  ``amplify`` (pipeline), ``presets``,
 with implicit 3D features*                               ``implicit_heightfield``,
 (terrain-amplification-2019)                             ``skeletal_set``, ``banded`` (Sec. 7)
 Peytavie et al. 2009, *Procedural           ``rocks``    ``aperiodic_tiles`` (corner cubes),

@@ -198,6 +198,23 @@ class NodeBuilder:
         self.built: dict[str, F.Node] = {}
         self.stack: list[str] = []
 
+    def define(self, name: str, table: dict) -> None:
+        """Add the named node table ``name`` (as if under ``[nodes]``); it is built on first use.
+
+        Raises
+        ------
+        ValueError
+            When ``name`` is already defined.
+        """
+        if name in self.defs:
+            raise ValueError(f"node {name!r} is already defined")
+        self.defs[name] = table
+
+    def forget(self, name: str) -> None:
+        """Remove the named table ``name`` and the node built from it (a generator's temporary node)."""
+        del self.defs[name]
+        self.built.pop(name, None)
+
     def build(self, item, parent: Table, key: str) -> F.Node:
         if isinstance(item, str):
             return self.named(item, parent, key)

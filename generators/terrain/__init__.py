@@ -3,8 +3,8 @@
 A DEM becomes an implicit heightfield; a geology (resistance) tree and erosion
 processes (sea, river, karst, hoodoos, strata) add caves, arches and overhangs as
 skeletal primitive sets; :mod:`.banded` polygonizes such trees in a band around
-the surface (Sec. 7). Entry point: :func:`.amplify.amplify` (the presets); the ``amplify`` command;
-node types in :mod:`.scene_nodes`.
+the surface (Sec. 7). Entry points: :func:`.amplify.amplify` and the presets of :mod:`.presets`; the
+``amplify`` command; node types in :mod:`.scene_nodes`.
 """
 
 __all__ = ["NODE_TYPES", "SCENE_TABLES", "COMMANDS", "BENCHMARKS"]

@@ -27,7 +27,8 @@ from arches_render.atomic import atomic_write
 from arches_render.commands import Progress, UsageError, bounded_int, positive_float
 from arches_render.field.heightmaps import DEMError, read_dem
 
-from .amplify import PRESETS, amplify
+from .amplify import amplify
+from .presets import PRESETS
 from .scene_writer import frame_camera, landscape_material, sun_for, toml_text
 
 #: Default largest DEM processed (cells); larger ones are averaged down.
@@ -47,7 +48,7 @@ def register(subparsers):
                    help="multiply the heights (default 1; for PNG, a relief of 1/4 of the tile width)")
     p.add_argument("--preset", choices=sorted(PRESETS), default="sea",
                    help="landforms to generate (default sea): " +
-                        "; ".join(f"{k}: {v}" for k, v in PRESETS.items()))
+                        "; ".join(f"{k}: {v.description}" for k, v in PRESETS.items()))
     p.add_argument("--seed", type=bounded_int("--seed", 0, 2 ** 31 - 1), default=0, help="random seed (default 0)")
     p.add_argument("--max-cells", type=bounded_int("--max-cells", 4, 16384 ** 2), default=MAX_CELLS,
                    help=f"larger DEMs are block-averaged down to this many cells (default {MAX_CELLS})")
@@ -62,8 +63,7 @@ def _scene_doc(result, name):
     H, extent = result.heights, result.extent
     base = min(float(n.bounds()[0][2]) for n in result.root.walk() if n.kind == "implicit_heightfield")
     zlo, zhi = float(H.min()), float(H.max())
-    elevation = {"sea": 16.0, "river": 32.0, "karst": 20.0, "hoodoos": 22.0, "strata": 22.0}
-    cam = frame_camera(H, extent, result.focus, elevation=elevation[result.stats["preset"]])
+    cam = frame_camera(H, extent, result.focus, elevation=PRESETS[result.stats["preset"]].camera_elevation)
     x0, y0, x1, y1 = extent
     size = max(x1 - x0, y1 - y0)
     stats = result.stats

@@ -1,0 +1,514 @@
+"""The presets of terrain amplification: geology, landform processes and their steps, as data.
+
+A preset (:class:`Preset`) is a geology function (the resistance tree ``rho`` it
+builds for a DEM, section 4), a landform function (the erosion processes of
+section 6 that add primitives to the tree) and the labels of the steps the
+landform function reports, side by side in :data:`PRESETS`.
+:func:`.amplify.amplify` runs them on an :class:`Amplification`, whose
+:class:`StepTimer` checks each reported step against the preset's list.
+
+Presets (lengths in DEM cells ``c`` and relief ``Z``):
+
+``sea``      Sea level at 0 when the DEM crosses it, else ``min + 0.12 Z``; a soft
+             stratum at sea level and soft spots on the coast; three steps of sea
+             erosion (section 6.1, Fig. 11), the second on the mesh of the terrain
+             carved by the first, so caves deepen and thin headlands are pierced
+             into arches. A water plane at sea level.
+``river``    Stream power ``A^1/2 s`` on the filled DEM, riverbed and banks; walls
+             carved up to ``max(4 c, Z / 4)`` above the water, more in the soft
+             strata of a layered geology: undercut canyon walls (Fig. 15, 23).
+``karst``    Invasion percolation from the deepest sinks through two soft
+             horizontal strata (section 6.2, Fig. 14, 17): tunnel segments.
+``hoodoos``  Placement by slope and drainage area, open grammar driven by
+             alternating hard and soft strata (section 6.3, Fig. 18-20).
+``strata``   The erosion node ``f - f_D (1 - rho)`` (section 6) over the steep
+             faces, with folded and faulted strata: layered cliffs with overhangs
+             (Fig. 4, 10).
+
+Carving energies. A carving primitive of falloff ``R_i`` and energy ``-e_i`` in rock
+of field value ``T`` removes the ball where ``e_i g(d / R_i) > T``. Each erosion
+sample asks for a cavity of radius ``r_i`` (``e``-proportional); we set
+``R_i = r_i / 0.6`` and ``e_i = T / g(0.6) / n_i`` where ``n_i = sum_j g(|c_i - c_j| / R_j)``
+is the overlap of the samples at ``c_i``: the paper only says energies are
+proportional to ``e``; without the ``1 / n_i`` a Poisson-dense set of overlapping
+primitives would carve the *sum* of its neighbours (tens of times too deep).
+
+References
+----------
+Paris, A., Galin, E., Peytavie, A., Guérin, E., Gain, J. (2019). Terrain
+amplification with implicit 3D features. ACM TOG 38(5).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import trimesh
+from scipy.ndimage import distance_transform_edt, maximum_filter
+from scipy.spatial import cKDTree
+
+from arches_render import field as F
+from arches_render.scene.nodes import NodeBuilder
+
+from . import hoodoos as hd, karst as ks
+from .accessibility import heightfield_mesh
+from .banded import polygonize_banded
+from .falloff import g
+from .geology import resistance
+from .river_erosion import river_erosion
+from .sea_erosion import sea_erosion_step
+from .shallow_erosion import ErosionPrimitives, sample_mesh
+from .skeletal_set import save_npz
+
+__all__ = ["PRESETS", "Preset", "Amplification", "NodeTables", "StepTimer", "SEA_STEPS"]
+
+_CAVITY_AT = 0.6  # cavity radius / falloff radius of a carving primitive
+SEA_STEPS = 3  # steps of sea erosion, as in the paper's Fig. 11
+
+
+class StepTimer:
+    """Progress and timings of a fixed list of named steps.
+
+    Parameters
+    ----------
+    labels : sequence of str
+        The steps, in order (unique).
+    progress : callable, optional
+        ``progress(done, total, label)`` after each step.
+
+    Attributes
+    ----------
+    timings : dict
+        ``{label: seconds}`` of the steps done.
+    """
+
+    def __init__(self, labels, progress=None):
+        self.labels, self.progress = list(labels), progress
+        self.timings: dict = {}
+        self._last = time.perf_counter()
+
+    @property
+    def done(self) -> int:
+        """Number of steps done."""
+        return len(self.timings)
+
+    def step(self, label: str) -> None:
+        """Close step ``label``, which must be the next one of the list (else a bug: raises)."""
+        expected = self.labels[self.done] if self.done < len(self.labels) else None
+        if label != expected:
+            raise RuntimeError(f"step {label!r} out of order: expected {expected!r} (steps {self.labels})")
+        now = time.perf_counter()
+        self.timings[label] = round(now - self._last, 4)
+        self._last = now
+        if self.progress:
+            self.progress(self.done, len(self.labels), label)
+
+
+class NodeTables:
+    """Node tables and their data files, built by the scene loader's builder.
+
+    The tree is written as scene-file tables (``[nodes.*]``) and built through the
+    loader's :class:`~arches_render.scene.nodes.NodeBuilder` from the very same tables
+    and data files, so the scene file holds exactly the tree that was generated.
+    """
+
+    def __init__(self, work_dir: Path, prefix: str):
+        self.dir, self.prefix = Path(work_dir), prefix
+        self.files: list = []
+        self.builder = NodeBuilder({}, self.dir / "amplified.toml", self.dir)
+
+    @property
+    def tables(self) -> dict:
+        """The ``[nodes.*]`` tables defined so far."""
+        return self.builder.defs
+
+    def file(self, suffix, write):
+        """Write a data file ``PREFIX.SUFFIX`` with ``write(path)``; return its relative name."""
+        rel = f"{self.prefix}.{suffix}"
+        path = self.dir / rel
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write(path)
+        self.files.append(rel)
+        return rel
+
+    def add(self, name, table):
+        """Define the table ``name`` and return its node."""
+        self.builder.define(name, table)
+        return self.builder.named(name)
+
+
+@dataclass
+class Amplification:
+    """One amplify run: the DEM, the tree being built and what the presets add to it."""
+
+    tree: NodeTables
+    heights: np.ndarray
+    extent: tuple
+    cell: float
+    R: float
+    T: float
+    rng: np.random.Generator
+    terrain: object = None
+    timer: StepTimer | None = None
+    sea_steps: int = SEA_STEPS
+    sea_spacing: float | None = None
+    sea_level: float | None = None
+    rho: Callable | None = None
+    children: list = field(default_factory=lambda: ["terrain"])
+    focus: list = field(default_factory=list)
+    stats: dict = field(default_factory=dict)
+
+    @property
+    def relief(self):
+        """``(zlo, zhi, Z)``: lowest and highest elevation, relief (at least 4 cells)."""
+        zlo, zhi = float(self.heights.min()), float(self.heights.max())
+        return zlo, zhi, max(zhi - zlo, 4 * self.cell)
+
+    @property
+    def size(self):
+        """``(W, D)``: the tile's width and depth in metres."""
+        x0, y0, x1, y1 = self.extent
+        return x1 - x0, y1 - y0
+
+    @property
+    def mesh_step(self) -> int:
+        """Subsampling of the DEM mesh: at most ~1024 vertices along a side."""
+        ny, nx = self.heights.shape
+        return max(1, int(math.ceil(max(nx, ny) / 1024)))
+
+    @property
+    def feature(self) -> float:
+        """Cavity scale: a fifth of the relief, at least 3 cells, at most 30."""
+        return float(np.clip(0.2 * self.relief[2], 3.0 * self.cell, 30.0 * self.cell))
+
+    def carve(self, name, arrays):
+        """Write ``arrays`` (one dict or a list merged into one set) as a ``skeletal_set`` node.
+
+        Returns ``(name, primitives, centres)`` or ``None`` when there is nothing to carve.
+        """
+        parts = [x for x in (arrays if isinstance(arrays, list) else [arrays]) if x is not None]
+        if not parts:
+            return None
+        merged = {k: np.concatenate([x[k] for x in parts]) for k in ("a", "b", "radius", "energy")}
+        rel = self.tree.file(f"{name}.npz", lambda p: save_npz(p, **merged))
+        # One set for all steps (one grid, one loop per ray step). No star noise on carving
+        # sets: the Poisson samples and rho already make the walls irregular, and the noise
+        # would triple the cost of every ray step near the terrain.
+        self.tree.add(name, {"type": "skeletal_set", "file": rel, "combine": "sum"})
+        return name, int(len(merged["radius"])), 0.5 * (merged["a"] + merged["b"])
+
+    def carving_arrays(self, prims: ErosionPrimitives):
+        """Arrays ``a, b, radius, energy`` of negative primitives carving the cavities of ``prims``."""
+        cell, T = self.cell, self.T
+        keep = prims.radius >= 0.25 * cell  # smaller cavities are below the DEM's resolution
+        a, b, r = prims.center[keep], prims.end[keep], prims.radius[keep]
+        if len(r) == 0:
+            return None
+        R = r / _CAVITY_AT
+        mid = 0.5 * (a + b)
+        # n_i = sum_j g(|c_i - c_j| / R_j), the primitive itself included (g(0) = 1).
+        pairs = cKDTree(mid).query_pairs(float(R.max()), output_type="ndarray")
+        d = np.linalg.norm(mid[pairs[:, 0]] - mid[pairs[:, 1]], axis=1)
+        overlap = (1.0 + np.bincount(pairs[:, 0], g(d, R[pairs[:, 1]]), minlength=len(r))
+                   + np.bincount(pairs[:, 1], g(d, R[pairs[:, 0]]), minlength=len(r)))
+        return dict(a=a, b=b, radius=R, energy=-T / g(_CAVITY_AT, 1.0) / overlap)
+
+    def add_carving(self, name, prims, count_key):
+        """Carve ``prims`` as node ``name`` (a child of the world), counted as ``stats[count_key]``."""
+        out = self.carve(name, self.carving_arrays(prims))
+        if out:
+            self.children.append(out[0])
+            self.stats[count_key] = out[1]
+            self.focus.append(out[2])
+
+
+def _karst_sizes(cell, Z):
+    """Tunnel radius and percolation lattice spacing of the karst preset."""
+    tunnel = max(1.6 * cell, 0.3 * float(np.clip(0.2 * Z, 3.0 * cell, 30.0 * cell)))
+    return tunnel, max(3.0 * cell, 1.8 * tunnel)
+
+
+def _band_mesh(root, extent, z0, z1, voxel, border):
+    """Mesh of ``root`` inside the slab ``z0 <= z <= z1`` (faces off the tile's border only)."""
+    x0, y0, x1, y1 = extent
+    box = F.Box([(x0 + x1) / 2, (y0 + y1) / 2, (z0 + z1) / 2], [(x1 - x0) / 2, (y1 - y0) / 2, (z1 - z0) / 2])
+    m = polygonize_banded(F.Intersection(root, box), voxel)
+    mesh = trimesh.Trimesh(np.asarray(m.vertices, np.float64), np.asarray(m.faces, np.int64), process=False)
+    c = mesh.triangles_center
+    inner = ((c[:, 0] > x0 + border) & (c[:, 0] < x1 - border) & (c[:, 1] > y0 + border)
+             & (c[:, 1] < y1 - border) & (c[:, 2] > z0 + 0.5 * voxel) & (c[:, 2] < z1 - 0.5 * voxel))
+    return mesh, inner
+
+
+def _turbulence(seed, wavelength, amplitude, octaves, **extra):
+    """A ``resistance_turbulence`` table (fBm resistance variations)."""
+    return {"type": "resistance_turbulence", "wavelength": float(wavelength), "amplitude": amplitude,
+            "offset": 0.0, "octaves": octaves, "seed": seed, **extra}
+
+
+# -- sea --------------------------------------------------------------------------------------
+def sea_geology(run: Amplification, noise_seed: int) -> dict:
+    """A soft stratum at sea level, soft spots on the thinnest headland and the cliff foot."""
+    H, cell, rng, sea_level = run.heights, run.cell, run.rng, run.sea_level
+    zlo, zhi, Z = run.relief
+    band = max(2.0 * cell, 0.2 * Z)
+    # Less durable spots (the paper places them by hand): one on the thinnest headland,
+    # where caves cut from both sides meet into an arch, and two on the cliff foot.
+    x0, y0, x1, y1 = run.extent
+    ny, nx = H.shape
+    land = H > sea_level
+    width = distance_transform_edt(land) * cell  # half-width of the land at each cell
+    ridge = land & (width == maximum_filter(width, size=3)) & (width >= 2 * cell)
+    ridge &= width <= max(3 * cell, 0.5 * Z)
+    picks = []
+    if ridge.any():
+        cand = np.flatnonzero(ridge)
+        thin = cand[np.argsort(width.ravel()[cand], kind="stable")][:max(1, len(cand) // 5)]
+        picks.append(int(rng.choice(thin)))
+    gy, gx = np.gradient(H, cell)
+    foot = (np.abs(H - sea_level) < band) & (np.hypot(gx, gy) > 0.5)
+    cand = np.flatnonzero(foot) if foot.any() else np.arange(H.size)
+    picks += [int(k) for k in rng.choice(cand, size=min(3 - len(picks), len(cand)), replace=False)]
+    soft = [{"type": "resistance_skeleton",
+             "a": [float(x0 + (k % nx) * cell), float(y0 + (k // nx) * cell), float(sea_level)],
+             "R": float(max(6 * cell, 0.3 * Z)), "weight": -0.5} for k in picks]
+    return {"type": "resistance_blend", "children": [
+        {"type": "resistance_constant", "value": 0.72},
+        {"type": "resistance_plane", "point": [0.0, 0.0, float(sea_level + 0.3 * band)],
+         "normal": [0.0, 0.0, 1.0], "R": float(band), "weight": -0.25},
+        _turbulence(noise_seed, max(Z / 6, 2 * cell), 0.12, 3)] + soft}
+
+
+def sea_steps(run: Amplification) -> list:
+    return [f"sea erosion step {k + 1}" for k in range(run.sea_steps)]
+
+
+def sea(run: Amplification) -> None:
+    """Sea erosion with accessibility, each step on the mesh of the terrain carved so far."""
+    H, extent, cell, tree = run.heights, run.extent, run.cell, run.tree
+    _, _, Z = run.relief
+    W, D = run.size
+    sea_range = max(2.0 * cell, 0.25 * Z)  # the paper: 8 m for its ~40 m cliffs
+    max_r = 0.8 * run.feature  # per step: three steps cut about two feature sizes into soft rock
+    mesh = heightfield_mesh(H, extent, run.mesh_step)
+    weight = None
+    steps_arrays = []
+    for k in range(run.sea_steps):
+        spacing = float(run.sea_spacing) if run.sea_spacing else max(1.5 * cell, max_r)
+        prims = sea_erosion_step(mesh, run.rho, run.sea_level, sea_range, spacing=spacing, max_radius=max_r,
+                                 beta=0.3, threshold=0.08, rays=16, seed=int(run.rng.integers(2 ** 31)),
+                                 face_mask=weight)
+        arr = run.carving_arrays(prims)
+        run.stats[f"sea_step{k + 1}_primitives"] = 0 if arr is None else int(len(arr["radius"]))
+        run.timer.step(f"sea erosion step {k + 1}")
+        if arr is None:  # nothing eroded: later steps would see the same terrain
+            for j in range(k + 1, run.sea_steps):
+                run.timer.step(f"sea erosion step {j + 1}")
+            break
+        steps_arrays.append(arr)
+        if k == run.sea_steps - 1:
+            break
+        # The next step samples the carved terrain: mesh of the sea band of the tree so far
+        # (sets given inline: only the final, merged set is written to a file).
+        inline = [{"type": "skeletal_set", "combine": "sum", **{n: v for n, v in x.items()}}
+                  for x in steps_arrays]
+        current = tree.add(f"_sea_step{k + 1}", {"type": "sum", "children": ["terrain"] + inline})
+        mesh, weight = _band_mesh(current, extent, run.sea_level - sea_range - 2 * max_r,
+                                  run.sea_level + sea_range + 2 * max_r,
+                                  # The band mesh only guides sampling and rays: at most ~384
+                                  # voxels across a large tile (small tiles: one cell).
+                                  max(cell, 0.25 * max_r, max(W, D) / 384.0), 2 * cell)
+        tree.builder.forget(f"_sea_step{k + 1}")
+    out = run.carve("sea_erosion", steps_arrays)
+    if out:
+        run.children.append(out[0])
+        # Frame the deepest erosion: the last step carves inside the notches and caves.
+        last = steps_arrays[-1]
+        run.focus.append(0.5 * (last["a"] + last["b"]))
+
+
+# -- river ------------------------------------------------------------------------------------
+def river_geology(run: Amplification, noise_seed: int) -> dict:
+    """Soft horizontal strata in a hard rock: undercuts where the river meets them."""
+    zlo, _, Z = run.relief
+    spacing = max(3.0 * run.cell, Z / 8)
+    return {"type": "resistance_blend", "children": [
+        {"type": "resistance_constant", "value": 0.75},
+        {"type": "resistance_strata", "spacing": float(spacing), "R": float(0.3 * spacing),
+         "weight": -0.6, "phase": float(zlo)},
+        _turbulence(noise_seed, 4 * run.cell, 0.1, 3, strata=False)]}
+
+
+def river(run: Amplification) -> None:
+    """Stream-power river erosion of the canyon walls."""
+    H, cell = run.heights, run.cell
+    _, _, Z = run.relief
+    mesh = heightfield_mesh(H, run.extent, run.mesh_step)
+    flood = max(4.0 * cell, 0.25 * Z)
+    prims = river_erosion(H, run.extent, mesh, run.rho, spacing=max(1.5 * cell, 0.8 * run.feature),
+                          max_radius=run.feature, flood_height=flood, beta=0.15, threshold=0.08,
+                          seed=int(run.rng.integers(2 ** 31)))
+    run.timer.step("stream power and sampling")
+    run.add_carving("river_erosion", prims, "river_primitives")
+
+
+# -- karst ------------------------------------------------------------------------------------
+def karst_geology(run: Amplification, noise_seed: int) -> dict:
+    """Two soft strata, each a few percolation sites thick (else the network dies out)."""
+    _, zhi, Z = run.relief
+    children = [{"type": "resistance_constant", "value": 0.8},
+                _turbulence(noise_seed, 6 * run.cell, 0.12, 3, strata=False)]
+    _, spacing = _karst_sizes(run.cell, Z)
+    for frac in (0.25, 0.65):
+        children.append({"type": "resistance_plane", "point": [0.0, 0.0, float(zhi - frac * Z)],
+                         "normal": [0.0, 0.0, 1.0], "R": float(2.0 * spacing), "weight": -0.6})
+    return {"type": "resistance_blend", "children": children}
+
+
+def karst(run: Amplification) -> None:
+    """Invasion percolation from the deepest sinks: a network of tunnels."""
+    H, extent = run.heights, run.extent
+    zlo, zhi, Z = run.relief
+    seeds = ks.karst_seeds(H, extent, 6, run.rng)
+    run.timer.step("sinks")
+    tunnel, spacing = _karst_sizes(run.cell, Z)
+    prims = ks.karst_network(run.terrain.elevation_np, extent, (zlo - 0.1 * Z, zhi), run.rho, seeds,
+                             spacing=spacing, max_radius=tunnel, rho0=0.45, epsilon=0.1, beta=0.3,
+                             max_sites=max(2000, H.size // 8), seed=int(run.rng.integers(2 ** 31)))
+    run.add_carving("karst_tunnels", prims, "karst_primitives")
+
+
+# -- hoodoos ----------------------------------------------------------------------------------
+def hoodoos_geology(run: Amplification, noise_seed: int) -> dict:
+    """Alternating hard and soft strata, about one grammar symbol per layer."""
+    zlo, _, Z = run.relief
+    spacing = max(2.0 * run.cell, 0.12 * Z)
+    return {"type": "resistance_blend", "children": [
+        {"type": "resistance_constant", "value": 0.3},
+        {"type": "resistance_strata", "spacing": float(spacing), "R": float(0.45 * spacing),
+         "weight": 0.6, "phase": float(zlo)},
+        _turbulence(noise_seed, 3 * run.cell, 0.1, 2, strata=False)]}
+
+
+def hoodoos(run: Amplification) -> None:
+    """Hoodoos placed by slope and drainage area, grown by the open shape grammar."""
+    H, extent, cell, T = run.heights, run.extent, run.cell, run.T
+    _, _, Z = run.relief
+    s0 = max(2.0 * cell, 0.15 * Z)
+    P = hd.hoodoo_probability(H, extent)
+    run.timer.step("placement probability")
+    P = P / max(float(P.max()), 1e-12)  # the best sites grow a hoodoo for sure
+    sym = hd.hoodoo_field(H, extent, run.terrain.elevation_np, run.rho, spacing=max(4.0 * cell, 1.6 * s0), s0=s0,
+                          width0=0.7 * s0, probability=P, seed=int(run.rng.integers(2 ** 31)))
+    if not len(sym):
+        return
+    Rf = np.maximum(0.8 * sym.width, 0.5 * cell)
+    x = math.sqrt(1.0 - 0.5 ** (1.0 / 3.0))  # g(x) = 1/2: the surface where 2T g = T
+    core = np.maximum(sym.width - x * Rf, 0.0)
+    rel = run.tree.file("hoodoos.npz", lambda p: save_npz(p, a=sym.a, b=sym.b, radius=Rf,
+                                                           energy=np.full(len(Rf), 2.0 * T), core=core))
+    run.tree.add("hoodoos", {"type": "skeletal_set", "file": rel, "combine": "max",
+                             "noise": {"amplitude": 0.12, "wavelength": float(max(s0 / 2, cell)),
+                                       "octaves": 2, "seed": int(run.rng.integers(2 ** 31))}})
+    run.children.append("hoodoos")
+    run.stats["hoodoos"] = int(sym.hoodoo.max() + 1)
+    run.stats["hoodoo_primitives"] = int(len(sym))
+    run.focus.append(0.5 * (sym.a + sym.b))
+
+
+# -- strata -----------------------------------------------------------------------------------
+def strata_geology(run: Amplification, noise_seed: int) -> dict:
+    """A folded, faulted layer cake."""
+    zlo, _, Z = run.relief
+    spacing = max(2.0 * run.cell, Z / 7)
+    x0, y0, x1, y1 = run.extent
+    # No 3-D turbulence here: the erosion node evaluates rho at every ray step near the
+    # cliffs, and the fold already makes the layers irregular.
+    layers = {"type": "resistance_blend", "children": [
+        {"type": "resistance_constant", "value": 0.25},
+        {"type": "resistance_strata", "spacing": float(spacing), "R": float(0.49 * spacing), "weight": 0.75,
+         "phase": float(zlo)}]}
+    # Gentle folds and a wide fault gouge: rho's Lipschitz bound scales the erosion node's,
+    # and with it the number of sphere-tracing steps near every cliff.
+    folded = {"type": "resistance_fold", "child": layers, "amplitude": float(0.15 * spacing),
+              "wavelength": float(max(x1 - x0, y1 - y0) / 3), "octaves": 1, "seed": noise_seed + 1}
+    ang = run.rng.uniform(0, np.pi)
+    return {"type": "resistance_fault", "child": folded,
+            "point": [float((x0 + x1) / 2), float((y0 + y1) / 2), 0.0],
+            "normal": [float(np.cos(ang)), float(np.sin(ang)), 0.0],
+            "slip": [0.0, 0.0, float(0.5 * spacing)], "width": float(0.5 * spacing)}
+
+
+def strata(run: Amplification) -> None:
+    """The erosion node over the steep faces of the DEM."""
+    H, extent, cell, R, T = run.heights, run.extent, run.cell, run.R, run.T
+    mesh = heightfield_mesh(H, extent, run.mesh_step)
+    steep = mesh.face_normals[:, 2] < math.cos(math.radians(40.0))
+    c = mesh.triangles_center
+    x0, y0, x1, y1 = extent
+    inner = (c[:, 0] > x0 + 2 * R) & (c[:, 0] < x1 - 2 * R) & (c[:, 1] > y0 + 2 * R) & (c[:, 1] < y1 - 2 * R)
+    pts, _ = sample_mesh(mesh, 3.0 * cell, (steep & inner).astype(float), run.rng)
+    run.timer.step("cliff sampling")
+    if not len(pts):
+        return
+    Rd = 5.0 * cell
+    rel = run.tree.file("strata_erosion.npz", lambda p: save_npz(p, a=pts, radius=np.full(len(pts), Rd),
+                                                                  energy=np.full(len(pts), 2.0 * T)))
+    run.tree.add("strata_field", {"type": "skeletal_set", "file": rel, "combine": "max"})
+    run.tree.add("strata_eroded", {"type": "erosion", "child": "terrain", "field": "strata_field",
+                                   "resistance": "geology"})
+    run.children = ["strata_eroded"]
+    run.stats["erosion_field_primitives"] = int(len(pts))
+    run.focus.append(pts)
+
+
+# -- the table ---------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Preset:
+    """One preset: what it makes, its geology, its landforms and the steps they report.
+
+    Attributes
+    ----------
+    description : str
+        One line for ``arches-render amplify --help``.
+    geology : callable
+        ``geology(run, noise_seed) -> table``: the resistance tree (a ``resistance_*``
+        node table).
+    landforms : callable
+        ``landforms(run)``: adds the preset's primitives to the tree through ``run``.
+    steps : callable
+        ``steps(run) -> labels`` of the steps ``landforms`` reports, in order.
+    camera_elevation : float
+        Degrees above the horizon of the written scene's camera.
+    """
+
+    description: str
+    geology: Callable
+    landforms: Callable
+    steps: Callable
+    camera_elevation: float
+
+    def resistance(self, run: Amplification) -> Callable:
+        """Build the geology as node ``geology`` of the tree; return ``rho(P)`` on numpy points."""
+        noise_seed = int(run.rng.integers(0, 2 ** 31))
+        node = run.tree.add("geology", self.geology(run, noise_seed))
+        return lambda P: resistance(node, P)
+
+
+PRESETS = {
+    "sea": Preset("sea cliffs, arches and caves (sea erosion with accessibility)",
+                  sea_geology, sea, sea_steps, camera_elevation=16.0),
+    "river": Preset("canyon with undercut walls (stream-power river erosion)",
+                    river_geology, river, lambda run: ["stream power and sampling"], camera_elevation=32.0),
+    "karst": Preset("cave network (invasion percolation)",
+                    karst_geology, karst, lambda run: ["sinks"], camera_elevation=20.0),
+    "hoodoos": Preset("hoodoos (open shape grammar)",
+                      hoodoos_geology, hoodoos, lambda run: ["placement probability"], camera_elevation=22.0),
+    "strata": Preset("layered cliffs with folds and faults (erosion node)",
+                     strata_geology, strata, lambda run: ["cliff sampling"], camera_elevation=22.0),
+}
