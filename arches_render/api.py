@@ -51,7 +51,6 @@ from .render.output import render_header, write_render
 from .render.renderer import build_scene, load_materials, render_layers
 from .scene import parse_scene, read_toml
 
-
 __all__ = ["Lookdev", "load", "compare"]
 
 

@@ -28,9 +28,8 @@ from __future__ import annotations
 import copy
 
 import drjit as dr
-import numpy as np
 
-from .node import Node, box_distance, opaque_float
+from .node import Node, box_distance, finite_box, opaque_float
 from .operators import Blend, SmoothIntersection
 
 #: Relative cost (one exact primitive = 1) above which a bounded subtree is culled.
@@ -106,8 +105,7 @@ def with_culling(root: Node, tolerance: float) -> Node:
             if any(a is not b for a, b in zip(kids, node.children)):
                 new = copy.copy(node)
                 new.children = kids
-        lo, hi = node.bounds()
-        bounded = np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))
+        bounded = finite_box(node) is not None
         if hasattr(node, "skip_margin"):
             new = copy.copy(new) if new is node else new
             new.skip_margin = margin

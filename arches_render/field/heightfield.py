@@ -45,6 +45,38 @@ import numpy as np
 from .node import Node, opaque_float
 
 
+def height_grid(heights, extent):
+    """Validate the elevation grid of a heightfield node (shared by every heightfield type).
+
+    Parameters
+    ----------
+    heights : array_like
+        ``(ny, nx)`` elevations in metres, ``ny, nx >= 2``, finite.
+    extent : sequence of 4 floats
+        ``(x0, y0, x1, y1)`` in metres, ``x1 > x0``, ``y1 > y0``.
+
+    Returns
+    -------
+    (numpy.ndarray, tuple)
+        float64 heights and the extent as four floats.
+
+    Raises
+    ------
+    ValueError
+        For a grid that is not 2-D and at least 2x2, non-finite heights or an
+        empty extent.
+    """
+    H = np.asarray(heights, dtype=np.float64)
+    if H.ndim != 2 or min(H.shape) < 2:
+        raise ValueError("heights must be a 2-D array of at least 2x2 samples")
+    if not np.all(np.isfinite(H)):
+        raise ValueError("heights contain NaN or infinite values")
+    x0, y0, x1, y1 = (float(v) for v in extent)
+    if not (x1 > x0 and y1 > y0):
+        raise ValueError("extent must satisfy x1 > x0 and y1 > y0")
+    return H, (x0, y0, x1, y1)
+
+
 class Heightfield(Node):
     """Ground under a bilinear elevation grid (see module docstring).
 
@@ -61,14 +93,7 @@ class Heightfield(Node):
     kind = "heightfield"
 
     def __init__(self, heights, extent, base=None):
-        H = np.asarray(heights, dtype=np.float64)
-        if H.ndim != 2 or min(H.shape) < 2:
-            raise ValueError("heights must be a 2-D array of at least 2x2 samples")
-        if not np.all(np.isfinite(H)):
-            raise ValueError("heights contain NaN or infinite values")
-        x0, y0, x1, y1 = (float(v) for v in extent)
-        if not (x1 > x0 and y1 > y0):
-            raise ValueError("extent must satisfy x1 > x0 and y1 > y0")
+        H, (x0, y0, x1, y1) = height_grid(heights, extent)
         self.heights_np = H
         self.ny, self.nx = H.shape
         self.extent = (x0, y0, x1, y1)

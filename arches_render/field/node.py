@@ -137,6 +137,23 @@ def box_distance(p, lo, hi):
                                  for i in range(3))))
 
 
+def finite_box(node) -> tuple[np.ndarray, np.ndarray] | None:
+    """``node.bounds()`` when every component is finite (the box may be empty), else ``None``.
+
+    Parameters
+    ----------
+    node : Node or any object with ``bounds() -> (lo, hi)``
+
+    Returns
+    -------
+    (numpy.ndarray, numpy.ndarray) or None
+    """
+    lo, hi = node.bounds()
+    if np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)):
+        return lo, hi
+    return None
+
+
 def box_union(boxes):
     """Smallest box containing all ``(lo, hi)`` boxes."""
     los, his = zip(*boxes)

@@ -51,7 +51,7 @@ NOISE_LIPSCHITZ = 3.76
 NOISE_RANGE = 1.2
 
 
-def _corner_hash(hx, hy, hz):
+def corner_hash(hx, hy, hz):
     """Hash of a lattice corner from its per-axis products (one multiply-xorshift).
 
     The per-axis terms ``h_k = i_k * P_k`` (large odd constants) are computed once
@@ -64,7 +64,7 @@ def _corner_hash(hx, hy, hz):
     return h >> 28
 
 
-def _grad_dot(h, x, y, z):
+def grad_dot(h, x, y, z):
     """``g . (x, y, z)`` for the improved-noise gradient picked by the hash ``h``."""
     b = h
     u = dr.select(b < 8, x, y)
@@ -72,7 +72,8 @@ def _grad_dot(h, x, y, z):
     return dr.select((b & 1) == 0, u, -u) + dr.select((b & 2) == 0, v, -v)
 
 
-def _fade(t):
+def fade(t):
+    """Perlin's quintic fade ``6t^5 - 15t^4 + 10t^3`` (C2 interpolation weight)."""
     return t * t * t * (t * (t * 6.0 - 15.0) + 10.0)
 
 
@@ -87,7 +88,7 @@ def gradient_noise(p, seed):
     fl = dr.floor(p)
     i = mi.Vector3i(fl)
     u = p - fl
-    w = mi.Vector3f(_fade(u.x), _fade(u.y), _fade(u.z))
+    w = mi.Vector3f(fade(u.x), fade(u.y), fade(u.z))
     ix, iy, iz = (mi.UInt32(v) for v in (i.x, i.y, i.z))
     hx = (ix * 0x8DA6B343 ^ seed, (ix + 1) * 0x8DA6B343 ^ seed)
     hy = (iy * 0xD8163841, (iy + 1) * 0xD8163841)
@@ -99,8 +100,8 @@ def gradient_noise(p, seed):
             wxy = wx * (w.y if cy else 1.0 - w.y)
             for cz in (0, 1):
                 wz = w.z if cz else 1.0 - w.z
-                h = _corner_hash(hx[cx], hy[cy], hz[cz])
-                result += wxy * wz * _grad_dot(h, u.x - cx, u.y - cy, u.z - cz)
+                h = corner_hash(hx[cx], hy[cy], hz[cz])
+                result += wxy * wz * grad_dot(h, u.x - cx, u.y - cy, u.z - cz)
     return result
 
 

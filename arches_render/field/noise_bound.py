@@ -16,7 +16,7 @@ In a cell, with local coordinates ``u in [0, 1]^3``, corners ``c in {0, 1}^3``,
     A_c(u) = grad W_c(u) d_c^T + W_c(u) I.
 
 The gradients ``g_c`` are taken from ``G``, the 12 vectors ``(+-1, +-1, 0)`` and
-permutations (``_grad_dot`` maps its 16 hash codes onto exactly these: codes
+permutations (``grad_dot`` maps its 16 hash codes onto exactly these: codes
 12..15 repeat ``(1,1,0), (-1,1,0), (0,-1,1), (0,-1,-1)``). We bound, for ALL
 ``12^8`` choices (a superset of what the hash produces),
 
@@ -344,11 +344,6 @@ def certify(grid: int = 8, net: int = 4, tol: float = 0.008, max_depth: int = 8,
     ub, net_max, cos_d, var, hd, ctr = worst
     return Certificate(ub + FP_MARGIN, state["LB"], net_max, cos_d, var, hd, ctr, critical, boxes,
                        state["evals"], time.perf_counter() - t0)
-
-
-def certify_gradient_bound(grid: int = 8, net: int = 4, **kwargs) -> float:
-    """Certified upper bound of ``|grad n|`` (all points, seeds, configurations); see :func:`certify`."""
-    return certify(grid=grid, net=net, **kwargs).bound
 
 
 def center_lower_bound():

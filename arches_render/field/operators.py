@@ -37,7 +37,6 @@ Journal, 16(2), 157-160.
 from __future__ import annotations
 
 import drjit as dr
-import numpy as np
 
 from .node import Node, box_intersection, box_union, hart_bounds, opaque_float
 
@@ -207,11 +206,3 @@ class SmoothIntersection(_NAry):
 
     def bounds(self):
         return box_intersection([c.bounds() for c in self.children])
-
-
-def finite_box(node: Node) -> tuple[np.ndarray, np.ndarray] | None:
-    """``node.bounds()`` if finite and non-empty, else ``None``."""
-    lo, hi = node.bounds()
-    if np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(hi >= lo):
-        return lo, hi
-    return None

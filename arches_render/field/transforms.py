@@ -12,7 +12,7 @@ from __future__ import annotations
 import mitsuba as mi
 import numpy as np
 
-from .node import Node, opaque_float
+from .node import Node, finite_box, opaque_float
 
 
 def rotation_matrix(axis, angle_deg: float) -> np.ndarray:
@@ -81,10 +81,11 @@ class Transform(Node):
         return self._s * f, tuple(self._s * d for d in ds)
 
     def bounds(self):
-        lo, hi = self.children[0].bounds()
-        if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+        box = finite_box(self.children[0])
+        if box is None:
             # Only axis-permuting maps keep infinite boxes meaningful; be safe.
             return np.full(3, -np.inf), np.full(3, np.inf)
+        lo, hi = box
         corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
                             for z in (lo[2], hi[2])])
         moved = corners @ self.M.T + self.t

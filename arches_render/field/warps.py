@@ -33,7 +33,7 @@ from .node import Node, hart_bounds, opaque_float
 from .noise import fbm, fbm_lipschitz, fbm_range
 
 
-class _FbmParams:
+class FbmParams:
     """Shared fBm parameters: amplitude, wavelength, octaves, lacunarity, gain, seed."""
 
     #: fBm fields evaluated per point (a domain warp needs three).
@@ -77,7 +77,7 @@ class _FbmParams:
                                                       self.gain_np) / self.wavelength_np
 
 
-class Noise(_FbmParams, Node):
+class Noise(FbmParams, Node):
     """fBm field ``a fbm(p / lambda)`` (unbounded; a mask or an operand)."""
 
     kind = "noise"
@@ -96,7 +96,7 @@ class Noise(_FbmParams, Node):
         return self.fbm_slope
 
 
-class Displace(_FbmParams, Node):
+class Displace(FbmParams, Node):
     """Child surface displaced along its field by fBm (see module docstring)."""
 
     kind = "displace"
@@ -133,7 +133,7 @@ class Displace(_FbmParams, Node):
         return self.children[0].lipschitz + self.fbm_slope
 
 
-class DomainWarp(_FbmParams, Node):
+class DomainWarp(FbmParams, Node):
     """Child evaluated at ``p + a W(p / lambda)`` (see module docstring)."""
 
     kind = "warp"

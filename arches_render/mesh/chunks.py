@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..field import Node, evaluate
-from .polygonize import BLOCK, TriangleMesh, _classify_blocks, default_voxel, field_normals
+from .polygonize import BLOCK, TriangleMesh, classify_blocks, default_voxel, field_normals
 
 __all__ = ["Chunk", "polygonize_chunks", "chunk_ranges"]
 
@@ -56,7 +56,7 @@ def _sample(node: Node, origin, voxel, start, shape):
     """Samples at grid indices ``start + [0, shape)`` (blocks certified free filled)."""
     lo_chunk = origin + np.asarray(start) * voxel
     nblocks = -(-np.asarray(shape) // BLOCK)
-    state = _classify_blocks(node, lo_chunk, voxel, nblocks)
+    state = classify_blocks(node, lo_chunk, voxel, nblocks)
     vol = np.empty(shape, np.float32)
     local = np.stack(np.meshgrid(*(np.arange(BLOCK),) * 3, indexing="ij"), -1).reshape(-1, 3)
     todo = []

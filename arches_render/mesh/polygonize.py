@@ -66,7 +66,7 @@ BLOCK = 16
 MAX_VOXELS = 400_000_000
 
 
-def _classify_blocks(node: Node, lo, voxel, nblocks):
+def classify_blocks(node: Node, lo, voxel, nblocks):
     """Per block: 0 = may hold surface, -1 = certainly air, +1 = certainly matter."""
     variant()
     idx = np.stack(np.meshgrid(*(np.arange(n) for n in nblocks), indexing="ij"), -1).reshape(-1, 3)
@@ -101,7 +101,7 @@ def sample_grid(node: Node, voxel: float, progress=None):
         raise ValueError(f"voxel {voxel:g} m gives a {shape.tolist()} grid ({np.prod(shape):.3g} voxels, "
                          f"at most {MAX_VOXELS:.3g}): use a larger voxel")
     nblocks = -(-shape // BLOCK)
-    state = _classify_blocks(node, lo, voxel, nblocks)
+    state = classify_blocks(node, lo, voxel, nblocks)
     vol = np.empty(shape, dtype=np.float32)
     todo = np.argwhere(state == 0)
     for (bi, bj, bk), s in np.ndenumerate(state):

@@ -216,12 +216,3 @@ def render_image(scene, spp: int, seed: int = 0, passes: int = 0, progress=None)
         if progress:
             progress(done, spp)
     return (acc / spp)[..., :3].astype(np.float32)
-
-
-def render_scene(desc, spp=None, seed=None, geometry=None, width=None, height=None, passes=None,
-                 voxel=None, progress=None) -> np.ndarray:
-    """Load, assemble and render a scene description; the one-call API."""
-    s = desc.render
-    scene = build_scene(desc, geometry, width, height, voxel)
-    return render_image(scene, spp or s.spp, s.seed if seed is None else seed,
-                        s.passes if passes is None else passes, progress)

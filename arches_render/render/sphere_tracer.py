@@ -29,6 +29,7 @@ import numpy as np
 
 from ..field import gradient
 from ..field.culling import with_culling
+from ..field.node import finite_box
 
 
 def ray_box(o, d, lo, hi):
@@ -58,9 +59,10 @@ class SphereTracer:
     """
 
     def __init__(self, field, eps=2e-4, omega=1.6, max_steps=512):
-        lo, hi = field.bounds()
-        if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+        box = finite_box(field)
+        if box is None:
             raise ValueError("the field is unbounded: intersect it with a box")
+        lo, hi = box
         pad = 1e-3 * float(np.max(hi - lo)) + 1e-4
         self.lo, self.hi = [float(v) - pad for v in lo], [float(v) + pad for v in hi]
         self.scale = float(np.linalg.norm(np.asarray(self.hi) - np.asarray(self.lo)))

@@ -36,6 +36,7 @@ from pathlib import Path
 import mitsuba as mi
 
 from .. import extensions, tomlfile
+from ..field.node import finite_box
 from .errors import SceneError
 from .nodes import NodeBuilder
 from .validate import Table
@@ -308,9 +309,7 @@ def parse_scene(data: dict, path) -> SceneDescription:
         if field_material not in materials:
             raise ft.error("material", f"unknown material '{field_material}' "
                                        f"(defined: {', '.join(sorted(materials))})")
-        lo, hi = field_node.bounds()
-        import numpy as np
-        if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+        if finite_box(field_node) is None:
             raise ft.error("root", "the field is unbounded (a plane or noise at the root): "
                                    "intersect it with a box")
         ft.finish()

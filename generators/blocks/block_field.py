@@ -83,7 +83,7 @@ import mitsuba as mi
 import numpy as np
 
 from arches_render.field.node import Node, box_distance, opaque_float
-from arches_render.field.noise import _corner_hash, _fade, _grad_dot, fbm_lipschitz, fbm_range
+from arches_render.field.noise import corner_hash, fade, fbm_lipschitz, fbm_range, grad_dot
 from arches_render.field.operators import smooth_max
 
 from .block_hulls import offset_box
@@ -105,7 +105,7 @@ def planar_noise(x, y, seed):
     fx, fy = dr.floor(x), dr.floor(y)
     ix, iy = mi.UInt32(mi.Int32(fx)), mi.UInt32(mi.Int32(fy))
     ux, uy = x - fx, y - fy
-    wx, wy = _fade(ux), _fade(uy)
+    wx, wy = fade(ux), fade(uy)
     hx = (ix * 0x8DA6B343 ^ seed, (ix + 1) * 0x8DA6B343 ^ seed)
     hy = (iy * 0xD8163841, (iy + 1) * 0xD8163841)
     hz = mi.UInt32(0)
@@ -115,7 +115,7 @@ def planar_noise(x, y, seed):
         ax = wx if cx else 1.0 - wx
         for cy in (0, 1):
             ay = wy if cy else 1.0 - wy
-            out += ax * ay * _grad_dot(_corner_hash(hx[cx], hy[cy], hz), ux - cx, uy - cy, zero)
+            out += ax * ay * grad_dot(corner_hash(hx[cx], hy[cy], hz), ux - cx, uy - cy, zero)
     return out
 
 
@@ -133,11 +133,6 @@ def planar_fbm(x, y, octaves, seed):
 def _code(o):
     o = np.asarray(o) + _RANGE
     return (o[..., 0] * (2 * _RANGE + 1) + o[..., 1]) * (2 * _RANGE + 1) + o[..., 2]
-
-
-def _decode(code):
-    w = 2 * _RANGE + 1
-    return np.stack([code // (w * w), (code // w) % w, code % w], -1) - _RANGE
 
 
 def image_boxes(tile, grow: float):

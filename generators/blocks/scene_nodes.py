@@ -41,6 +41,8 @@ import math
 
 import numpy as np
 
+from arches_render.field.node import finite_box
+
 from .fracture_discs import STRUCTURES
 
 __all__ = ["NODE_TYPES", "tile_params", "tile_from_table"]
@@ -108,9 +110,10 @@ def _blocks(t, ctx):
             raise t.error("region", "must be [x0, y0, z0, x1, y1, z1] with x1 > x0, y1 > y0, "
                                     f"z1 > z0 (got {reg})")
     else:
-        lo, hi = host.bounds()
-        if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(hi > lo)):
+        box = finite_box(host)
+        if box is None or not np.all(box[1] > box[0]):
             raise t.error("region", "is required: the host is unbounded")
+        lo, hi = box
     resistance = None
     if t.has("resistance"):
         v = t.raw("resistance")

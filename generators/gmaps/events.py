@@ -37,7 +37,7 @@ import numpy as np
 
 from . import operations as op
 from .face_collapse import vertex_face_collapse
-from .geometry import face_triangles, first_hit, oriented_faces, winding_number, _project
+from .geometry import face_triangles, first_hit, oriented_faces, project, winding_number
 from .gmap import GMap, GMapError
 
 TOL = 1e-9
@@ -164,9 +164,9 @@ class EventQueue:
                 continue
             o, n = op.face_plane(g, c)
             vids = g.face_vertices(c)
-            xy = _project(g.points[vids], n)
-            q = _project(np.atleast_2d(g.points[v] + 1e-6 * d), n)[0]
-            if op._point_in_polygon(q, xy):
+            xy = project(g.points[vids], n)
+            q = project(np.atleast_2d(g.points[v] + 1e-6 * d), n)[0]
+            if op.point_in_polygon(q, xy):
                 return c
         return None
 
@@ -175,11 +175,11 @@ class EventQueue:
         cyc = g.face_cycle(corner)
         o, n = op.face_plane(g, corner)
         best = None
-        a0 = _project(np.atleast_2d(p0), n)[0]
+        a0 = project(np.atleast_2d(p0), n)[0]
         ids = [g.vertex(x) for x in cyc]
-        xy = _project(g.points[ids], n)
+        xy = project(g.points[ids], n)
         for attempt in range(3):
-            a1 = _project(np.atleast_2d(it.target), n)[0]
+            a1 = project(np.atleast_2d(it.target), n)[0]
             best, corner_hit = None, False
             for k in range(0, len(cyc), 2):
                 u, w = ids[k], ids[k + 1]

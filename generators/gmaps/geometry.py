@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .gmap import GMap, GMapError, VOLUME
+from .gmap import VOLUME, GMap, GMapError
 
 EPS_REL = 1e-10
 PERTURB = np.array([1.0, 1e-3, 1e-6])   # generic direction of the symbolic offset
@@ -31,7 +31,7 @@ def newell_normal(pts: np.ndarray) -> np.ndarray:
     return np.array([d[:, 1] @ s[:, 2], d[:, 2] @ s[:, 0], d[:, 0] @ s[:, 1]])
 
 
-def _project(pts, normal):
+def project(pts, normal):
     """2-D coordinates of points in a plane of normal ``normal`` (right-handed basis)."""
     nx, ny, nz = (float(c) for c in normal)
     ln = (nx * nx + ny * ny + nz * nz) ** 0.5 or 1.0
@@ -70,7 +70,7 @@ def triangulate_polygon(pts: np.ndarray, ids=None) -> list[tuple[int, int, int]]
     nrm = newell_normal(pts)
     if not np.linalg.norm(nrm) > 0:
         raise GMapError("degenerate (zero-area) face")
-    xy = _project(pts, nrm)
+    xy = project(pts, nrm)
     scale = np.ptp(xy, axis=0).max() or 1.0
     eps = 1e-12 * scale * scale
     idx = list(range(n))

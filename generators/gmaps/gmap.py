@@ -270,14 +270,6 @@ class GMap:
         ids = self.vertex_ids()
         return np.flatnonzero((ids == v) & (self.alpha[0, :self._top] >= 0))
 
-    def dart_of_vertex(self, v: int, label: int | None = None) -> int:
-        ds = self.vertex_darts(v)
-        if label is not None:
-            ds = ds[(self.attr[ds] >> VERTEX_BITS) == label]
-        if len(ds) == 0:
-            raise GMapError(f"no dart carries vertex {v}" + ("" if label is None else f" in volume {label}"))
-        return int(ds[0])
-
     # ------------------------------------------------------------------ sewing
     def sew3(self, d: int, e: int) -> None:
         """α3-sew the face side of ``d`` to that of ``e`` (``d`` meets ``e``)."""

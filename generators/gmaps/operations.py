@@ -30,8 +30,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .geometry import newell_normal, triangulate_polygon, _project
-from .gmap import CORNER, GMap, GMapError, VERTEX, VERTEX_BITS
+from .geometry import newell_normal, project, triangulate_polygon
+from .gmap import CORNER, VERTEX, VERTEX_BITS, GMap, GMapError
 
 
 # ---------------------------------------------------------------- helpers
@@ -216,7 +216,8 @@ def slide_edge(g: GMap, corner: int, edge_dart: int, x) -> int:
 
 
 # ------------------------------------------------------- §3.4 vertex–face
-def _point_in_polygon(q, poly):
+def point_in_polygon(q, poly):
+    """Whether the 2-D point ``q`` lies inside the polygon ``poly`` ``(n, 2)`` (even-odd rule)."""
     inside = False
     n = len(poly)
     for i in range(n):
@@ -279,8 +280,8 @@ def vertex_face_hole(g: GMap, v: int, label: int, face: int) -> dict:
     for d in faces_at(g, v, label):
         if len(g.face_cycle(d)) != 6:
             raise GMapError("vertex_face_hole: faces around the vertex must be triangles")
-    outer2d_all = _project(g.points[fverts], n)
-    proj = lambda p: _project(np.atleast_2d(p), n)[0]  # noqa: E731
+    outer2d_all = project(g.points[fverts], n)
+    proj = lambda p: project(np.atleast_2d(p), n)[0]  # noqa: E731
     # 1. hole corners on the edges around v (all checked before the map changes)
     cuts = []
     for d in ring:
@@ -290,15 +291,15 @@ def vertex_face_hole(g: GMap, v: int, label: int, face: int) -> dict:
         if not (sv * sw < 0):
             raise GMapError("vertex_face_hole: a neighbour of the vertex is not on the other side of the face")
         h = pv + sv / (sv - sw) * (pw - pv)
-        if not _point_in_polygon(proj(h), outer2d_all):
+        if not point_in_polygon(proj(h), outer2d_all):
             raise GMapError("vertex_face_hole: the hole would leave the face")
         cuts.append(h)
     m = len(ring)
     # bridge (Fig. 6): nearest visible (border corner, hole corner) pair, chosen now
     fcyc = g.face_cycle(face)
     outer_c = fcyc[0::2]
-    outer2d = _project(g.points[[g.vertex(c) for c in outer_c]], n)
-    ring_xy = _project(np.asarray(cuts), n)
+    outer2d = project(g.points[[g.vertex(c) for c in outer_c]], n)
+    ring_xy = project(np.asarray(cuts), n)
     area_outer = _signed_area(outer2d)
     ring_order = list(range(m))
     if np.sign(_signed_area(ring_xy)) == np.sign(area_outer):

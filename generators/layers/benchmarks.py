@@ -119,7 +119,7 @@ def bench_layers_field_evals(repeat):
     dr.sync_thread()
     return dict(value=n / t / 1e6, unit="M evals/s", baseline=20.0, baseline_is="goal",
                 near_surface_mevals=n / t_near / 1e6, stacks=f"{S.nx}x{S.ny}", sigma=node.sigma,
-                fast_path_cells=node._coarse.fractions)
+                fast_path_cells=node.fast_path_fractions)
 
 
 def bench_layers_stabilize_s(repeat):

@@ -262,6 +262,11 @@ class ConvolutionSurface(Node):
             self._box = (np.array([x0, y0, z0]), np.array([x0, y0, z0]))
         self._coarse = _CoarseDistance(self.sums.np, stacks, sigma)
 
+    @property
+    def fast_path_fractions(self) -> dict:
+        """Shares of the coarse cells that skip the exact integral: ``{'empty', 'full'}``."""
+        return dict(self._coarse.fractions)
+
     # -------------------------------------------------------------- evaluation
     def _exact(self, p):
         fp = _Footprint(self, p)

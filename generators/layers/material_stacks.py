@@ -112,13 +112,6 @@ class MaterialStacks:
         """``(z0, z1)``: base and top of the grid in metres."""
         return self.origin[2], self.origin[2] + self.n_levels * self.dz
 
-    def column_centers(self):
-        """``(x, y)`` arrays of shape ``(ny, nx)``: the central axis of every stack."""
-        x0, y0, _ = self.origin
-        xs = x0 + (np.arange(self.nx) + 0.5) * self.cell
-        ys = y0 + (np.arange(self.ny) + 0.5) * self.cell
-        return np.meshgrid(xs, ys)
-
     def heights(self) -> np.ndarray:
         """Top of the highest non-air layer of every stack (metres, shape ``(ny, nx)``)."""
         return (self.origin[2] + column_heights(self.offsets, self.count) * self.dz).reshape(self.ny, self.nx)

@@ -261,9 +261,6 @@ class RockInstances:
     def __len__(self):
         return len(self.ids)
 
-    def world_seeds(self):
-        return self.origin + (self.store.seed[self.ids] + self.offsets) * self.cell
-
     def tiles(self) -> np.ndarray:
         """Index of the corner cube (or periodic tile) holding each rock's seed."""
         P = float(self.store.meta["cells_per_period"])

@@ -44,8 +44,10 @@ from pathlib import Path
 
 import numpy as np
 
+from arches_render.field.node import finite_box
+
 from .seed_points import SeedParams
-from .tile_params import ErosionParams, TileParams, TILINGS
+from .tile_params import TILINGS, ErosionParams, TileParams
 
 __all__ = ["RockPile", "parse_rock_pile"]
 
@@ -246,9 +248,10 @@ def parse_rock_pile(t, builder, field_node, materials: dict, scene_file, index: 
         if not np.all(hi > lo):
             raise t.error("extent", f"must be [x0, y0, z0, x1, y1, z1] with x1 > x0, y1 > y0, z1 > z0 (got {ext})")
     else:
-        lo, hi = support.bounds()
-        if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+        box = finite_box(support)
+        if box is None:
             raise t.error("extent", "is required: the support is unbounded")
+        lo, hi = box
         pad = 2 * rock_size
         lo, hi = lo - pad, hi + pad
     cells = float(np.prod((hi - lo) / rock_size))

@@ -71,7 +71,8 @@ from skimage.measure import marching_cubes
 from arches_render.backend import variant
 from arches_render.field import Node, evaluate
 from arches_render.field.heightfield import Heightfield
-from arches_render.field.operators import Difference, Intersection, Union, finite_box
+from arches_render.field.node import finite_box
+from arches_render.field.operators import Difference, Intersection, Union
 from arches_render.field.primitives import Box
 from arches_render.mesh.polygonize import MAX_VOXELS, TriangleMesh, default_voxel, field_normals
 

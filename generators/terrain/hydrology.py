@@ -47,7 +47,13 @@ _DJ = np.array([-1, 0, 1, -1, 1, -1, 0, 1], dtype=np.int64)
 
 
 @numba.njit(cache=True)
-def _heap_push(keys, vals, n, key, val):
+def heap_push(keys, vals, n, key, val):
+    """Push ``(key, val)`` on the binary min-heap held in ``keys[:n]``, ``vals[:n]``; returns ``n + 1``.
+
+    Ties are ordered by ``val`` (a cell index), so fills are deterministic. Written
+    out for numba: ``heapq`` there needs typed lists of tuples, and the arrays are
+    reused across the whole fill.
+    """
     i = n
     keys[i] = key
     vals[i] = val
@@ -64,7 +70,8 @@ def _heap_push(keys, vals, n, key, val):
 
 
 @numba.njit(cache=True)
-def _heap_pop(keys, vals, n):
+def heap_pop(keys, vals, n):
+    """Pop the smallest ``(key, val)`` of the heap of :func:`heap_push`; returns ``(key, val, n - 1)``."""
     key, val = keys[0], vals[0]
     n -= 1
     keys[0], vals[0] = keys[n], vals[n]
@@ -98,7 +105,7 @@ def _priority_flood(H, epsilon, di, dj):
     for j in range(ny):
         for i in range(nx):
             if j == 0 or i == 0 or j == ny - 1 or i == nx - 1:
-                n = _heap_push(keys, vals, n, Z[j, i], j * nx + i)
+                n = heap_push(keys, vals, n, Z[j, i], j * nx + i)
                 done[j, i] = True
     head = 0
     tail = 0
@@ -107,7 +114,7 @@ def _priority_flood(H, epsilon, di, dj):
             c = pit[head]
             head += 1
         else:
-            _, c, n = _heap_pop(keys, vals, n)
+            _, c, n = heap_pop(keys, vals, n)
         cj, ci = c // nx, c % nx
         zc = Z[cj, ci]
         for k in range(8):
@@ -123,7 +130,7 @@ def _priority_flood(H, epsilon, di, dj):
                 pit[tail] = j * nx + i
                 tail += 1
             else:
-                n = _heap_push(keys, vals, n, Z[j, i], j * nx + i)
+                n = heap_push(keys, vals, n, Z[j, i], j * nx + i)
         if head == tail:
             head = 0
             tail = 0

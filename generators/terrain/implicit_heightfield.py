@@ -66,6 +66,7 @@ import numpy as np
 
 from arches_render.backend import variant
 from arches_render.field import Heightfield
+from arches_render.field.heightfield import height_grid
 from arches_render.field.node import box_distance, opaque_float
 from arches_render.field.noise import fbm, fbm_lipschitz, fbm_range
 
@@ -102,14 +103,7 @@ class ImplicitHeightfield(Heightfield):
     kind = "implicit_heightfield"
 
     def __init__(self, heights, extent, R=None, T=None, base=None, bumps=None, amplification=None):
-        H = np.asarray(heights, dtype=np.float64)
-        if H.ndim != 2 or min(H.shape) < 2:
-            raise ValueError("heights must be a 2-D array of at least 2x2 samples")
-        if not np.all(np.isfinite(H)):
-            raise ValueError("heights contain NaN or infinite values")
-        x0, y0, x1, y1 = (float(v) for v in extent)
-        if not (x1 > x0 and y1 > y0):
-            raise ValueError("extent must satisfy x1 > x0 and y1 > y0")
+        H, (x0, y0, x1, y1) = height_grid(heights, extent)
         cell = min((x1 - x0) / (H.shape[1] - 1), (y1 - y0) / (H.shape[0] - 1))
         R = float(R) if R is not None else min(4.0 * cell, 0.25 * min(x1 - x0, y1 - y0))
         if not R > 0:

@@ -42,7 +42,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from .hydrology import _heap_pop, _heap_push, fill_depressions, pits
+from .hydrology import fill_depressions, heap_pop, heap_push, pits
 from .shallow_erosion import ErosionPrimitives, erosion_intensity
 
 __all__ = ["PercolationLattice", "invasion_percolation", "karst_seeds", "karst_network"]
@@ -109,12 +109,12 @@ def _percolate(shape, rho, perturbed, allowed, seeds, rho0, branching, max_sites
     for s in seeds:
         if allowed[s] and not queued[s]:
             queued[s] = True
-            m = _heap_push(keys, vals, m, perturbed[s], s)
+            m = heap_push(keys, vals, m, perturbed[s], s)
     u_at = 0
     nl = lower.shape[0]
     idx = np.arange(nl)
     while m > 0 and count < max_sites:
-        _, c, m = _heap_pop(keys, vals, m)
+        _, c, m = heap_pop(keys, vals, m)
         if rho[c] >= rho0:
             continue
         order[count] = c
@@ -137,7 +137,7 @@ def _percolate(shape, rho, perturbed, allowed, seeds, rho0, branching, max_sites
                 continue
             queued[q] = True
             parent[q] = c
-            m = _heap_push(keys, vals, m, perturbed[q], q)
+            m = heap_push(keys, vals, m, perturbed[q], q)
     return order[:count], parent
 
 

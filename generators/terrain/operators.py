@@ -39,7 +39,7 @@ import mitsuba as mi
 import numpy as np
 
 from arches_render.field.node import Node, box_union
-from arches_render.field.warps import _FbmParams
+from arches_render.field.warps import FbmParams
 
 
 def value_max(node: Node):
@@ -123,7 +123,7 @@ class Sum(Node):
         return None if any(m is None for m in sups) else sum(sups)
 
 
-class LocalWarp(_FbmParams, Node):
+class LocalWarp(FbmParams, Node):
     """Child warped by ``p + delta(p) clamp(f_D(p), 0, 1)`` (see module docstring).
 
     Parameters

@@ -238,10 +238,3 @@ class ErosionPrimitives:
 
     def __len__(self):
         return len(self.radius)
-
-    def concat(self, other):
-        """The primitives of both sets."""
-        return ErosionPrimitives(np.concatenate([self.center, other.center]),
-                                 np.concatenate([self.end, other.end]),
-                                 np.concatenate([self.radius, other.radius]),
-                                 np.concatenate([self.intensity, other.intensity]))
