@@ -219,7 +219,7 @@ def test_usd_rock_pile_is_a_point_instancer_of_its_stones(tmp_path, monkeypatch)
     from pxr import Usd, UsdGeom
 
     from arches_render.scene import load_scene
-    monkeypatch.setenv("ARCHES_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setenv("ARCHES_RENDER_CACHE", str(tmp_path / "cache"))
     scene = tmp_path / "pile.toml"
     scene.write_text(PILE)
     out = tmp_path / "pile.usd"

@@ -25,13 +25,13 @@ PERIODIC = TileParams(tiling="periodic", poisson_radius=0.14, periodic_voxels=40
 @pytest.fixture(scope="module")
 def cache(tmp_path_factory):
     d = tmp_path_factory.mktemp("rock_cache")
-    old = os.environ.get("ARCHES_CACHE_DIR")
-    os.environ["ARCHES_CACHE_DIR"] = str(d)
+    old = os.environ.get("ARCHES_RENDER_CACHE")
+    os.environ["ARCHES_RENDER_CACHE"] = str(d)
     yield d
     if old is None:
-        os.environ.pop("ARCHES_CACHE_DIR")
+        os.environ.pop("ARCHES_RENDER_CACHE")
     else:
-        os.environ["ARCHES_CACHE_DIR"] = old
+        os.environ["ARCHES_RENDER_CACHE"] = old
 
 
 @pytest.fixture(scope="module")
@@ -258,8 +258,7 @@ def test_rocks_command_builds_then_reuses_the_cache(tmp_path):
     scene.write_text(_scene_text('support = { shape = "box", center = [0, 0, 0], size = [2, 2, 1] }\n'
                                  'rock_size = 0.3\ntiling = "periodic"\npoisson_radius = 0.15\nseed = 8\n'
                                  'erosion = { steps = 3 }\npreset = "basalt"'))
-    env = dict(os.environ)
-    env.pop("ARCHES_CACHE_DIR", None)             # default: .cache/ beside the scene
+    env = dict(os.environ, ARCHES_RENDER_CACHE=str(tmp_path / ".cache"))  # a new cache folder
     out = tmp_path / "tiles.npz"
     r = _cli("rocks", str(scene), "-o", str(out), "-q", env=env)
     assert r.returncode == 0, r.stderr

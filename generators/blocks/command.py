@@ -12,11 +12,12 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from arches_render.cache import cache_dir
 from arches_render.commands import Progress, UsageError, find_node, output_file
 from arches_render.scene import read_toml
 
 from .scene_nodes import tile_params
-from .tile_cache import cache_dir, cached_tile, save_tile
+from .tile_cache import cached_tile, save_tile
 
 
 def register(subparsers) -> None:
@@ -44,5 +45,5 @@ def run(args) -> int:
     st = tile.stats
     print(f"wrote {out} ({params.structure}: {tile.n_blocks} blocks from {st['points']} samples and "
           f"{st['discs']} fractures, {tile.nbytes() / 1e6:.3f} MB; {time.perf_counter() - t0:.1f} s; "
-          f"cache {cache_dir()})")
+          f"cache {cache_dir('blocks')})")
     return 0

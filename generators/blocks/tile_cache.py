@@ -13,9 +13,9 @@ fractures) are not made into blocks; the paper turns degenerate clusters into
 "thick polygon, line segment or point primitives", which at this size would be
 invisible specks.
 
-:func:`cached_tile` keys a tile by the SHA-256 of its parameters and keeps it as a
-``.npz`` in a cache folder (``$ARCHES_RENDER_CACHE/blocks`` or
-``~/.cache/arches-render/blocks``), written atomically.
+:func:`cached_tile` keys a tile by its parameters and the digest of the code that
+builds it, and keeps it as a ``.npz`` in the ``blocks/`` folder of the project's
+cache (:mod:`arches_render.cache`).
 
 References
 ----------
@@ -24,22 +24,22 @@ Paris et al. (2020), sections 4 and 6 (Tables 1 and 2).
 
 from __future__ import annotations
 
-import hashlib
 import json
-import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from arches_render import cache
+from arches_render.atomic import atomic_path
+
 from .block_hulls import block_anchors, hull_planes
 from .fracture_discs import STRUCTURES, fracture_discs
 from .fracture_graph import fracture_clusters
 from .poisson_disc import poisson_disc_periodic
 
-__all__ = ["BlockTile", "TileParams", "build_tile", "save_tile", "load_tile", "cached_tile",
-           "cache_dir"]
+__all__ = ["BlockTile", "TileParams", "build_tile", "save_tile", "load_tile", "cached_tile"]
 
 FORMAT_VERSION = 4
 # The modules whose code decides a tile's blocks (see TileParams.key).
@@ -95,10 +95,8 @@ class TileParams:
     def key(self) -> str:
         """Cache key: the parameters (seed included) and a digest of the generating code,
         so that a tile cached by older code is never served."""
-        from arches_render.source_digest import source_digest
-        code = source_digest(Path(__file__).resolve().parent, _CODE_MODULES, str(FORMAT_VERSION))
-        text = json.dumps({"v": FORMAT_VERSION, "code": code, **self.__dict__}, sort_keys=True, default=list)
-        return hashlib.sha256(text.encode()).hexdigest()[:24]
+        code = cache.source_digest(Path(__file__).resolve().parent, _CODE_MODULES, str(FORMAT_VERSION))
+        return cache.cache_key(dict(self.__dict__), code)
 
 
 @dataclass
@@ -224,7 +222,6 @@ def build_tile(params: TileParams, progress=None) -> BlockTile:
 
 def save_tile(tile: BlockTile, path) -> None:
     """Write a tile as ``.npz`` atomically."""
-    from arches_render.atomic import atomic_path
     meta = json.dumps({"version": FORMAT_VERSION, "size": tile.size, "params": tile.params,
                        "stats": tile.stats}, default=list)
     with atomic_path(Path(path)) as tmp:
@@ -247,25 +244,23 @@ def load_tile(path) -> BlockTile:
     return BlockTile(size=float(meta["size"]), params=meta["params"], stats=meta["stats"], **arrays)
 
 
-def cache_dir() -> Path:
-    root = os.environ.get("ARCHES_RENDER_CACHE")
-    return (Path(root) if root else Path.home() / ".cache" / "arches-render") / "blocks"
-
-
 def cached_tile(params: TileParams, folder=None, progress=None) -> BlockTile:
-    """The tile of ``params`` from the cache, built and stored on a miss."""
+    """The tile of ``params`` from the cache, built and stored on a miss.
+
+    Parameters
+    ----------
+    params : TileParams
+    folder : str or Path, optional
+        Cache folder; default the cache's ``blocks/`` folder.
+    progress : callable, optional
+        Passed to :func:`build_tile` on a miss.
+
+    Returns
+    -------
+    BlockTile
+    """
     params.validate()
-    folder = Path(folder) if folder else cache_dir()
-    path = folder / f"{params.structure}-{params.key()}.npz"
-    if path.exists():
-        try:
-            return load_tile(path)
-        except ValueError:
-            pass  # stale or damaged: rebuild
-    tile = build_tile(params, progress)
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-        save_tile(tile, path)
-    except OSError:
-        pass  # a read-only cache only costs time
+    folder = Path(folder) if folder else cache.cache_dir("blocks")
+    tile, _ = cache.load_or_build(folder / f"{params.structure}-{params.key()}.npz", load_tile,
+                                  lambda: build_tile(params, progress), save_tile)
     return tile

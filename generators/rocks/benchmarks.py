@@ -117,7 +117,7 @@ def bench_instances_5000(repeat):
     with tempfile.TemporaryDirectory() as tmp:
         scene = Path(tmp) / "pile5000.toml"
         scene.write_text(_SCENE.format(rock_size=0.191))
-        env = dict(os.environ, ARCHES_CACHE_DIR=str(Path(tmp) / "cache"))
+        env = dict(os.environ, ARCHES_RENDER_CACHE=str(Path(tmp) / "cache"))
         runs = []
         # Run 0 builds the tiles and compiles kernels (not timed); then fresh processes.
         for i in range(repeat + 1):

@@ -1,8 +1,7 @@
 """``arches-render rocks SCENE -o TILES.npz``: build (or reuse) the rock tiles of a scene's pile.
 
 The tiles of ``[[rock_piles]]`` entry ``--pile`` (default 0) are taken from the
-tile cache or built and cached (see
-:mod:`.tile_cache`), then written to ``TILES.npz``
+tile cache or built and cached (see :mod:`.tile_cache`), then written to ``TILES.npz``
 (:class:`~arches_render.generators.rocks.rock_store.RockStore` arrays). A later
 render of the scene reuses the cache.
 """
@@ -41,7 +40,7 @@ def run(args) -> int:
     pile = piles[args.pile]
     t0 = time.perf_counter()
     bar = Progress("rock tiles", "region", args.quiet)
-    store, source = load_or_build(pile.params, pile.cache_dir, bar, args.workers)
+    store, source = load_or_build(pile.params, progress=bar, workers=args.workers)
     bar.close()
     elapsed = time.perf_counter() - t0
     out.parent.mkdir(parents=True, exist_ok=True)

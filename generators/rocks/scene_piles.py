@@ -31,9 +31,9 @@ rock_size > 0          metres per cell (a rock is about one cell across)
 [preset = "basalt"]    a triplanar preset, forced to object space, with [overrides]
 =====================  ==================================================================
 
-Tiles are built on first use and cached (:mod:`.tile_cache`) under
-``$ARCHES_CACHE_DIR`` or ``.cache/`` beside the scene; the rocks become one
-Mitsuba mesh per tile (or group of tiles) with baked transforms.
+Tiles are built on first use and cached (:mod:`.tile_cache`, in the project's
+cache: :mod:`arches_render.cache`); the rocks become one Mitsuba mesh per tile
+(or group of tiles) with baked transforms.
 """
 
 from __future__ import annotations
@@ -69,7 +69,6 @@ class RockPile:
     offset: np.ndarray
     min_inside: float
     material: str
-    cache_dir: Path
     stats: dict = dc_field(default_factory=dict)
     _buffers: list | None = None
 
@@ -82,7 +81,7 @@ class RockPile:
         """The selected rocks (:class:`.instancing.RockInstances`), building or loading tiles."""
         from . import instancing as ins
         from .tile_cache import load_or_build
-        store, source = load_or_build(self.params, self.cache_dir, progress)
+        store, source = load_or_build(self.params, progress=progress)
         lo, hi = (np.asarray(e, float) for e in self.extent)
         ids, offs = ins.candidate_rocks(store, (lo - self.offset) / self.rock_size,
                                         (hi - self.offset) / self.rock_size, self.params.seed)
@@ -274,11 +273,10 @@ def parse_rock_pile(t, builder, field_node, materials: dict, scene_file, index: 
         material = t.string("material", "default")
         if material not in materials:
             raise t.error("material", f"unknown material '{material}' (defined: {', '.join(sorted(materials))})")
-    from .tile_cache import cache_dir
     t.finish()
     try:
         return RockPile(index=index, params=params, support=support, extent=(lo, hi),
                         rock_size=rock_size, offset=offset,
-                        min_inside=min_inside, material=material, cache_dir=cache_dir(scene_file))
+                        min_inside=min_inside, material=material)
     except ValueError as exc:  # pragma: no cover - every value is range-checked above
         raise SceneError(scene_file, t.path, str(exc)) from None
