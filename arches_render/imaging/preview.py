@@ -4,12 +4,10 @@ The encoding is colour-science's sRGB transfer function (IEC 61966-2-1) applied
 after exposure and clipping to [0, 1]; no tone mapping, so a preview shows the
 numbers the golden tests compare, with highlights above 1 clipped.
 
-PNGs are written by a small encoder on top of :mod:`zlib`: it writes to a file
-object, so the output goes through :func:`arches_render.atomic.atomic_write`
-directly, and it needs no Mitsuba import. Importing Mitsuba loads Dr.Jit and
-libLLVM, which :func:`arches_render.backend.set_variant` must do first (it
-picks the libLLVM), so an image helper must not trigger it. (Mitsuba's
-``mi.util.write_bitmap`` also writes asynchronously by default.)
+PNGs are 8-bit, tagged sRGB, and written by Pillow into the file object of
+:func:`arches_render.atomic.atomic_write` (no half-written preview), without
+Mitsuba (``mi.util.write_bitmap`` writes asynchronously by default, and an image
+helper should not load the renderer).
 
 References
 ----------
@@ -22,16 +20,20 @@ References
 from __future__ import annotations
 
 import os
-import struct
 import warnings
-import zlib
 from pathlib import Path
 
 import numpy as np
+from PIL import Image
+from PIL.PngImagePlugin import PngInfo
 
 from ..atomic import atomic_write
 
-__all__ = ["encode_srgb", "to_srgb8", "write_png", "encode_png"]
+__all__ = ["encode_srgb", "to_srgb8", "write_png"]
+
+#: PNG chunks that tag the pixels as sRGB (W3C PNG 11.3.2: rendering intent 0,
+#: and the matching gAMA of 1/2.2 for viewers that ignore sRGB).
+_SRGB_CHUNKS = ((b"sRGB", b"\x00"), (b"gAMA", (45455).to_bytes(4, "big")))
 
 
 def _colour():
@@ -89,56 +91,16 @@ def to_srgb8(rgb_linear, exposure: float = 0.0) -> np.ndarray:
     return np.round(encode_srgb(rgb_linear, exposure) * 255.0).astype(np.uint8)
 
 
-def _chunk(kind: bytes, data: bytes) -> bytes:
-    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
-
-
-def encode_png(pixels: np.ndarray, srgb: bool = True) -> bytes:
-    """Encode 8-bit pixels as a PNG file.
-
-    Parameters
-    ----------
-    pixels : numpy.ndarray
-        uint8 array, ``(H, W)`` (grey), ``(H, W, 3)`` (RGB) or ``(H, W, 4)`` (RGBA).
-    srgb : bool, optional
-        Tag the image as sRGB (``sRGB`` and ``gAMA`` chunks) so viewers do not
-        re-interpret its colours.
-
-    Returns
-    -------
-    bytes
-        The PNG file.
-
-    Raises
-    ------
-    ValueError
-        For another dtype or shape.
-
-    References
-    ----------
-    W3C PNG Specification (Third Edition), sections 5 (chunks), 7.3 (filtering)
-    and 11.3.2 (``sRGB``/``gAMA``).
-    """
+def _png_image(pixels) -> Image.Image:
+    """A Pillow image of 8-bit pixels ``(H, W)``, ``(H, W, 1)``, ``(H, W, 3)`` or ``(H, W, 4)``."""
     a = np.asarray(pixels)
     if a.dtype != np.uint8:
-        raise ValueError(f"encode_png needs uint8 pixels, got {a.dtype}")
-    if a.ndim == 2:
-        a = a[..., None]
-    if a.ndim != 3 or a.shape[2] not in (1, 3, 4) or a.shape[0] == 0 or a.shape[1] == 0:
-        raise ValueError(f"encode_png needs (H, W), (H, W, 3) or (H, W, 4) pixels, got {a.shape}")
-    h, w, c = a.shape
-    colour_type = {1: 0, 3: 2, 4: 6}[c]
-    rows = a.reshape(h, w * c)
-    # Filter type 2 ("Up") for every row: smooth renders compress better as
-    # differences to the previous row, and it is one numpy subtraction.
-    up = rows.copy()
-    up[1:] -= rows[:-1]  # uint8 arithmetic wraps modulo 256, as the filter requires
-    raw = np.concatenate([np.full((h, 1), 2, np.uint8), up], axis=1).tobytes()
-    out = [b"\x89PNG\r\n\x1a\n", _chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, colour_type, 0, 0, 0))]
-    if srgb:
-        out += [_chunk(b"sRGB", b"\x00"), _chunk(b"gAMA", struct.pack(">I", 45455))]
-    out += [_chunk(b"IDAT", zlib.compress(raw, 6)), _chunk(b"IEND", b"")]
-    return b"".join(out)
+        raise ValueError(f"PNG previews need uint8 pixels, got {a.dtype}")
+    if a.ndim == 3 and a.shape[2] == 1:
+        a = a[..., 0]
+    if not (a.ndim == 2 or (a.ndim == 3 and a.shape[2] in (3, 4))) or a.shape[0] == 0 or a.shape[1] == 0:
+        raise ValueError(f"PNG previews need (H, W), (H, W, 3) or (H, W, 4) pixels, got {a.shape}")
+    return Image.fromarray(np.ascontiguousarray(a))
 
 
 def write_png(path: str | os.PathLike, rgb_linear, exposure: float = 0.0) -> Path:
@@ -159,14 +121,21 @@ def write_png(path: str | os.PathLike, rgb_linear, exposure: float = 0.0) -> Pat
     pathlib.Path
         ``path``.
 
+    Raises
+    ------
+    ValueError
+        For pixels that are not ``(H, W)``, ``(H, W, 3)`` or ``(H, W, 4)``.
+
     References
     ----------
-    IEC 61966-2-1:1999; W3C PNG Specification (Third Edition).
+    IEC 61966-2-1:1999; W3C PNG Specification (Third Edition), 11.3.2 (``sRGB``).
     """
     a = np.asarray(rgb_linear)
-    pixels = a if a.dtype == np.uint8 else to_srgb8(a, exposure)
-    data = encode_png(pixels)
+    image = _png_image(a if a.dtype == np.uint8 else to_srgb8(a, exposure))
+    info = PngInfo()
+    for kind, data in _SRGB_CHUNKS:
+        info.add(kind, data)
     path = Path(path)
     with atomic_write(path, "wb") as f:
-        f.write(data)
+        image.save(f, format="PNG", pnginfo=info)
     return path
