@@ -185,5 +185,5 @@ def _window_max(H: np.ndarray, w: int) -> np.ndarray:
     Cell ``(j, i)`` spans samples ``i..i+1``; cells within ``w`` span samples
     ``i-w..i+w+1``; a centred window of ``2w + 3`` samples covers them.
     """
-    from scipy.ndimage import maximum_filter
+    from scipy.ndimage import maximum_filter  # on use: keeps `import arches_render.field` light
     return maximum_filter(H, size=2 * w + 3, mode="nearest")

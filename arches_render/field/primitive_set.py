@@ -64,7 +64,7 @@ def grid_lists(lo_boxes, hi_boxes, grid_lo, cell, res):
 
 def empty_distance(lo_boxes, hi_boxes, grid_lo, cell, res):
     """Per cell, a lower bound of the distance from any of its points to the set."""
-    from scipy.ndimage import distance_transform_edt
+    from scipy.ndimage import distance_transform_edt  # on use: keeps `import arches_render.field` light
     i0 = np.clip(np.floor((lo_boxes - grid_lo) / cell).astype(np.int64), 0, res - 1)
     i1 = np.clip(np.floor((hi_boxes - grid_lo) / cell).astype(np.int64), 0, res - 1)
     occupied = np.zeros(tuple(res[::-1]), dtype=bool)  # (z, y, x) to match the cell index

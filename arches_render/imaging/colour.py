@@ -65,7 +65,7 @@ def ocio_config():
     -------
     PyOpenColorIO.Config
     """
-    import PyOpenColorIO as ocio
+    import PyOpenColorIO as ocio  # on use: only the ACES views need it
     return ocio.Config.CreateFromBuiltinConfig(OCIO_CONFIG)
 
 

@@ -347,7 +347,7 @@ def flip_error(ref, test) -> tuple[np.ndarray, float]:
     Andersson et al. 2020, via NVIDIA's ``flip_evaluator`` (default 67 pixels
     per degree).
     """
-    import flip_evaluator
+    import flip_evaluator  # on use: only FLIP scores need it (conftest loads this module)
 
 
     r = np.ascontiguousarray(encode_srgb(ref), dtype=np.float32)

@@ -172,7 +172,7 @@ def write_exr(path: str | os.PathLike, rgb, header: Mapping[str, object] | None 
     ----------
     Kainz et al., "Technical Introduction to OpenEXR" (see the module references).
     """
-    import OpenEXR
+    import OpenEXR  # on use: keeps the golden harness (conftest) light
 
     rgb = _as_image(rgb, "rgb")
     shape = rgb.shape[:2]

@@ -54,7 +54,7 @@ def write_mp4(path, frames: Iterable[np.ndarray], fps: float = 24.0, crf: int = 
     ValueError
         For no frames, frames of different sizes or a non-uint8 frame.
     """
-    import imageio_ffmpeg
+    import imageio_ffmpeg  # on use: only --mp4 needs it
 
     frames = iter(frames)
     first = next(frames, None)

@@ -45,7 +45,7 @@ class BakedTextures:
 
 
 def _raster_kernel():
-    import numba
+    import numba  # on use: slow to import, only baking needs it
 
     @numba.njit(cache=True)
     def raster(uv, faces, width, height, tri, bary):
@@ -93,7 +93,7 @@ def rasterize_uv(mesh: UVMesh) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _dilate(img: np.ndarray, covered: np.ndarray) -> np.ndarray:
-    from scipy.ndimage import distance_transform_edt
+    from scipy.ndimage import distance_transform_edt  # on use, as numba above
     if covered.all() or not covered.any():
         return img
     _, (iy, ix) = distance_transform_edt(~covered, return_indices=True)

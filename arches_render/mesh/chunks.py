@@ -95,7 +95,7 @@ def polygonize_chunks(node: Node, voxel: float | None = None, chunk_cells: int =
     list of Chunk
         Non-empty chunks, row-major.
     """
-    from skimage.measure import marching_cubes
+    from skimage.measure import marching_cubes  # on use: slow to import (the CLI loads this module)
     voxel = float(voxel) if voxel else default_voxel(node)
     lo, hi = node.bounds()
     origin = np.asarray(lo, np.float64) - voxel

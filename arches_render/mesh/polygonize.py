@@ -40,7 +40,7 @@ class TriangleMesh:
     normals: np.ndarray
 
     def to_trimesh(self):
-        import trimesh
+        import trimesh  # on use: slow to import, only export needs it
         return trimesh.Trimesh(self.vertices, self.faces, vertex_normals=self.normals, process=False)
 
 
@@ -139,7 +139,7 @@ def polygonize(node: Node, voxel: float | None = None, progress=None) -> Triangl
     -------
     TriangleMesh
     """
-    from skimage.measure import marching_cubes
+    from skimage.measure import marching_cubes  # on use: slow to import (the CLI loads this module)
 
     voxel = float(voxel) if voxel else default_voxel(node)
     vol, origin = sample_grid(node, voxel, progress)

@@ -61,7 +61,7 @@ def export_textured(mesh: UVMesh, textures: BakedTextures | None, path) -> list[
     ValueError
         For another extension.
     """
-    import trimesh
+    import trimesh  # on use: slow to import, only mesh export needs it
     path = Path(path)
     fmt = path.suffix.lower().lstrip(".")
     if fmt not in TEXTURED_FORMATS:

@@ -36,6 +36,9 @@ import numpy as np
 
 from ..atomic import atomic_path
 
+# pxr (usd-core), trimesh and scipy are imported inside the functions that use
+# them: they load slowly, and only USD output needs them (the CLI loads this module).
+
 __all__ = ["USD_FORMATS", "decompose", "write_usd_stage"]
 
 USD_FORMATS = ("usd", "usda", "usdc")

@@ -45,7 +45,7 @@ class UVMesh:
 
     def to_trimesh(self, image=None):
         """A trimesh with UVs (and ``image`` as base colour texture, if given)."""
-        import trimesh
+        import trimesh  # on use: slow to import, only export needs it
         from trimesh.visual import TextureVisuals
         from trimesh.visual.material import PBRMaterial
         mat = None
@@ -77,7 +77,7 @@ def uv_atlas(mesh: TriangleMesh, resolution: int = 1024, padding: int = 4) -> UV
     ----------
     xatlas (``Atlas.generate`` with ``PackOptions.resolution``, ``padding``).
     """
-    import xatlas
+    import xatlas  # on use: only --uv needs it
     atlas = xatlas.Atlas()
     atlas.add_mesh(np.ascontiguousarray(mesh.vertices, np.float32), np.ascontiguousarray(mesh.faces, np.uint32),
                    np.ascontiguousarray(mesh.normals, np.float32))

@@ -51,7 +51,7 @@ def denoise(beauty, albedo=None, normal=None, quality: str = "high") -> np.ndarr
     ----------
     Intel Open Image Denoise, ``RT`` filter (see module references).
     """
-    import pyoidn
+    import pyoidn  # on use: loads the OIDN library, only --denoise needs it
 
     c = np.ascontiguousarray(np.clip(np.nan_to_num(beauty, nan=0.0), 0.0, None), dtype=np.float32)
     if c.ndim != 3 or c.shape[2] != 3:

@@ -24,11 +24,14 @@ https://distributed.dask.org
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
+from pathlib import Path
 from typing import Iterator, Sequence
 
 import numpy as np
 
+from ..imaging.golden import update_golden
 from .jobs import RenderJob, run_job
 
 __all__ = ["dask_client", "map_jobs", "tile_grid", "render_tiled", "regenerate_goldens"]
@@ -50,9 +53,7 @@ def dask_client(scheduler: str | None = None, workers: int | None = None) -> Ite
     ------
     dask.distributed.Client
     """
-    import logging
-
-    from dask.distributed import Client, LocalCluster
+    from dask.distributed import Client, LocalCluster  # on use: dask is slow to import
     if scheduler:
         client = Client(scheduler)
         try:
@@ -94,7 +95,7 @@ def map_jobs(client, jobs: Sequence[RenderJob], keys: Sequence | None = None):
     ------
     (key, (numpy.ndarray, dict))
     """
-    from dask.distributed import as_completed
+    from dask.distributed import as_completed  # on use: dask is slow to import
     keys = list(range(len(jobs))) if keys is None else list(keys)
     threads = _threads_per_worker(client)
     jobs = [j if j.threads else j.with_(threads=threads) for j in jobs]
@@ -188,9 +189,6 @@ def regenerate_goldens(scenes: Sequence, golden_dir, width: int, height: int, re
     -------
     list of Golden
     """
-    from pathlib import Path
-
-    from ..imaging.golden import update_golden
     jobs, keys = [], []
     for path in scenes:
         path = Path(path).resolve()

@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from .aovs import BASE_LAYERS
+from .denoise import denoise as oidn
 from .distributed import map_jobs
 from .jobs import RenderJob, run_job
 from .output import is_complete, render_header, write_render
@@ -139,7 +140,6 @@ def _write_frame(plan: TurntablePlan, k: int, result, denoise: bool) -> Path:
     rgb, layers = result
     denoised = None
     if denoise:
-        from .denoise import denoise as oidn
         denoised = oidn(rgb, layers["albedo"][0], layers["normal"][0])
     return write_render(plan.paths[k], rgb, layers, plan.headers[k], denoised)
 

@@ -37,6 +37,7 @@ import mitsuba as mi
 
 from .. import extensions, tomlfile
 from ..field.node import finite_box
+from ..materials import presets
 from .errors import SceneError
 from .nodes import NodeBuilder
 from .validate import Table
@@ -142,7 +143,6 @@ def _material(t: Table, builder) -> tuple[dict, list]:
     if kind == "diffuse":
         d = {"type": "diffuse", "reflectance": _rgb(t, "color", [0.5, 0.5, 0.5])}
     else:
-        from ..materials import presets
         name = t.string("preset", "terrain")
         over = t.raw("overrides", {})
         if not isinstance(over, dict):

@@ -44,6 +44,8 @@ import numpy as np
 from arches_render.field.node import finite_box
 
 from .fracture_discs import STRUCTURES
+from .replication import replicate
+from .tile_cache import TileParams, cached_tile, load_tile
 
 __all__ = ["NODE_TYPES", "tile_params", "tile_from_table"]
 
@@ -53,7 +55,6 @@ TILE_KEYS = ("structure", "tile_size", "point_radius", "spacing", "disc_radius",
 
 def tile_params(t):
     """:class:`~.tile_cache.TileParams` from the tile keys of a ``blocks`` table."""
-    from .tile_cache import TileParams
     size = t.number("tile_size", 20.0, lo=1.0, hi=1000.0)
     r = t.number("point_radius", None, lo=size / 60.0, hi=size / 4.0)
     spacing = t.number("spacing", None, lo=0.0, hi=size, lo_open=True)
@@ -74,7 +75,6 @@ def tile_params(t):
 
 def tile_from_table(t, base_dir, progress=None):
     """The tile of a ``blocks`` table: its ``tile`` file, or built from its keys (cached)."""
-    from .tile_cache import cached_tile, load_tile
     if t.has("tile"):
         path = base_dir / t.string("tile")
         for key in TILE_KEYS:
@@ -98,7 +98,6 @@ def _range(t, key, default):
 
 
 def _blocks(t, ctx):
-    from .replication import replicate
     host = ctx.build(t.raw("host"), t, "host")
     tile = tile_from_table(t, ctx.base_dir, ctx.progress)
     if t.has("tile"):

@@ -38,10 +38,14 @@ import math
 
 import numpy as np
 
+from arches_render.field import Heightfield
 from arches_render.scene.errors import SceneError
+from arches_render.scene.nodes import load_heights
 from arches_render.scene.validate import Table
 
+from .convolution_surface import ConvolutionSurface, MaterialRatio
 from .material_stacks import GRANULAR, MATERIALS, ROCK, SAND, MaterialStacks
+from .operations import TOOLS, apply_operations
 
 
 def _extent(t: Table, default=None):
@@ -116,7 +120,6 @@ def _source(t: Table, ctx) -> MaterialStacks:
     cell = t.number("cell", lo=0, lo_open=True)
     column = _column(t)
     if kind == "node":
-        from arches_render.field import Heightfield
         node = ctx.build(t.raw("node"), t, "node")
         lo, hi = node.bounds()
         default = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
@@ -140,8 +143,6 @@ def _source(t: Table, ctx) -> MaterialStacks:
     if kind == "flat":
         H = np.full((ny, nx), t.number("elevation", 0.0))
         return _from_heights(t, H, extent, cell, column)
-    from arches_render.field import Heightfield
-    from arches_render.scene.nodes import load_heights
     dem = load_heights(t, ctx.base_dir)
     hf = Heightfield(dem, extent)
     X, Y = np.meshgrid(extent[0] + (np.arange(nx) + 0.5) * cell, extent[1] + (np.arange(ny) + 0.5) * cell)
@@ -187,7 +188,6 @@ def _profile(t: Table, n_path):
 
 
 def _operation(t: Table) -> dict:
-    from .operations import TOOLS
     tool = t.string("tool", choices=set(TOOLS))
     op = {"tool": tool, "stabilize": t.boolean("stabilize", True)}
     if tool == "sculpt":
@@ -224,7 +224,6 @@ def _operation(t: Table) -> dict:
 
 def build_stacks(t: Table, ctx):
     """The edited :class:`MaterialStacks` of a ``layers`` table, and its ``sigma``."""
-    from .operations import apply_operations
     stacks = _source(t, ctx)
     sig = t.number("sigma", 0.5 * stacks.cell, lo=0.25 * stacks.cell, hi=2.0 * stacks.cell)
     seed = t.integer("seed", 0, lo=0, hi=2 ** 31 - 1)
@@ -248,13 +247,11 @@ def build_stacks(t: Table, ctx):
 
 
 def _layers(t: Table, ctx):
-    from .convolution_surface import ConvolutionSurface
     stacks, sig = build_stacks(t, ctx)
     return ConvolutionSurface(stacks, sigma=sig)
 
 
 def _layers_ratio(t: Table, ctx):
-    from .convolution_surface import ConvolutionSurface, MaterialRatio
     name = t.string("terrain")
     terrain = ctx.named(name, t, "terrain")
     if not isinstance(terrain, ConvolutionSurface):

@@ -45,8 +45,14 @@ from pathlib import Path
 import numpy as np
 
 from arches_render.field.node import finite_box
+from arches_render.materials import presets
+from arches_render.scene.errors import SceneError
 
+from . import instancing as ins
+from .instancing import instance_buffers
+from .mitsuba_meshes import rock_meshes_mitsuba
 from .seed_points import SeedParams
+from .tile_cache import load_or_build
 from .tile_params import TILINGS, ErosionParams, TileParams
 
 __all__ = ["RockPile", "parse_rock_pile"]
@@ -79,8 +85,6 @@ class RockPile:
 
     def instances(self, progress=None):
         """The selected rocks (:class:`.instancing.RockInstances`), building or loading tiles."""
-        from . import instancing as ins
-        from .tile_cache import load_or_build
         store, source = load_or_build(self.params, progress=progress)
         lo, hi = (np.asarray(e, float) for e in self.extent)
         ids, offs = ins.candidate_rocks(store, (lo - self.offset) / self.rock_size,
@@ -93,13 +97,11 @@ class RockPile:
     def buffers(self, progress=None) -> list:
         """World-space vertex buffers merged per tile (computed once)."""
         if self._buffers is None:
-            from .instancing import instance_buffers
             self._buffers = instance_buffers(self.instances(progress))
         return self._buffers
 
     def shapes(self, bsdfs: dict, progress=None) -> list:
         """Mitsuba meshes of the pile with the pile's BSDF from ``bsdfs``."""
-        from .mitsuba_meshes import rock_meshes_mitsuba
         return rock_meshes_mitsuba(self.buffers(progress), bsdfs[self.material])
 
     def point_instancer(self) -> dict | None:
@@ -142,7 +144,6 @@ def _interval(t, key, lo, hi):
 
 
 def _support(t, builder, field_node, base_dir: Path):
-    from . import instancing as ins
     item = t.raw("support")
     if isinstance(item, str):
         if item == "field":
@@ -208,7 +209,6 @@ def parse_rock_pile(t, builder, field_node, materials: dict, scene_file, index: 
     SceneError
         Naming the file, the key and the allowed range.
     """
-    from arches_render.scene.errors import SceneError
     scene_file = Path(scene_file)
     support = _support(t, builder, field_node, scene_file.parent)
     rock_size = t.number("rock_size", lo=0, lo_open=True)
@@ -260,7 +260,6 @@ def parse_rock_pile(t, builder, field_node, materials: dict, scene_file, index: 
     if t.has("material") and t.has("preset"):
         raise t.error("preset", "give either material or preset, not both")
     if t.has("preset"):
-        from arches_render.materials import presets
         over = t.raw("overrides", {})
         if not isinstance(over, dict):
             raise t.error("overrides", "must be a table")
