@@ -285,6 +285,7 @@ def sea_geology(run: Amplification, noise_seed: int) -> dict:
 
 
 def sea_steps(run: Amplification) -> list:
+    """One step per sea-erosion step (``options["steps"]`` of amplify, default 3)."""
     return [f"sea erosion step {k + 1}" for k in range(run.sea_steps)]
 
 
