@@ -147,3 +147,17 @@ def test_degenerate_dems_get_an_answer_or_a_clear_error():
     bad[3, 3] = np.inf
     with pytest.raises(ValueError, match="finite"):
         choose_preset(bad, 1.0)
+
+
+@pytest.mark.parametrize("name", list(SHIPPED))
+def test_shipped_dems_read_with_the_dem_reader_and_are_documented(name):
+    from generators.terrain.dem_io import read_dem
+    dem = read_dem(DATA / f"{name}.npy")
+    assert dem.step == 1 and dem.filled == 0  # no reduction, no hole
+    np.testing.assert_array_equal(dem.heights, _load(name))
+    doc = (DATA / "DEMS.md").read_text()
+    row = [line for line in doc.splitlines() if line.startswith(f"| `{name}.npy` |")]
+    assert len(row) == 1 and row[0].rstrip().endswith(f"| `{SHIPPED[name][1]}` |")  # the table states the preset
+    if name.startswith("real_"):
+        assert "Licence" in doc and (DATA / "LICENSE.matplotlib.txt").exists()
+        assert (DATA / "LICENSE.tinerator.txt").exists()

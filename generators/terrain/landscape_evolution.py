@@ -110,8 +110,23 @@ class Strata:
 
     @classmethod
     def alternating(cls, bottom, top, period, hard_fraction=0.35, jitter=0.4, seed=0, **kw):
-        """Soft/hard pairs between ``bottom`` and ``top`` (m), each pair ``period`` thick
-        on average, thicknesses varied by ``+-jitter`` (seeded), hard rock on top of each pair.
+        """Soft/hard pairs from ``bottom`` up to ``top``, hard rock on top of each pair.
+
+        Parameters
+        ----------
+        bottom, top : float
+            Rock-frame elevations (m) of the first base and of the end of the stack.
+        period : float
+            Mean thickness of a pair (m).
+        hard_fraction : float
+            Mean share of a pair that is hard.
+        jitter : float
+            Relative spread of each pair's thickness and hard share (uniform, seeded),
+            so that beds are not evenly spaced.
+        seed : int
+            Seed of the spread.
+        **kw
+            ``hard_k_factor``, ``hard_talus_deg``.
 
         Returns
         -------
