@@ -61,9 +61,18 @@ def test_auto_never_picks_sea_inland_even_below_sea_level():
     assert (H < 0).mean() > 0.03  # a real closed area below 0 m
     preset, reason, stats = choose_preset(H, cell)
     assert preset != "sea" and stats["sea_fraction"] == 0.0, reason
-    # The inland real DEMs, shifted so that their valleys (connected to the edge) stay above 0.
+    # The inland shipped DEMs; and the real canyon lowered until its floor lies 50 m below sea
+    # level, closed at the tile's edge by a rim 40 m wide above 0 m: a basin, still inland.
     for name in ("real_nm_canyon_10m", "real_jacksboro_80m", "eroded_canyon", "eroded_mesas"):
         assert choose_preset(_load(name), SHIPPED[name][0])[0] != "sea"
+    H = _load("real_nm_canyon_10m")
+    border = np.zeros(H.shape, bool)
+    border[:4], border[-4:], border[:, :4], border[:, -4:] = True, True, True, True
+    low = H - (H.min() + 50.0)
+    low[border] = np.maximum(low[border], 1.0)  # the tile's edge stays above sea level
+    assert (low < 0).mean() > 0.01
+    preset, reason, stats = choose_preset(low, 10.0)
+    assert preset != "sea" and stats["sea_fraction"] == 0.0, reason
 
 
 def test_auto_picks_sea_on_a_coast_that_reaches_the_edge_only():
