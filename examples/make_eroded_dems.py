@@ -35,10 +35,10 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
 
-from generators.terrain import landscape_evolution as le  # noqa: E402
-from generators.terrain.fbm_heightmap import fbm_heightmap  # noqa: E402
+import arches_render  # noqa: E402,F401  (points Dr.Jit at a good libLLVM first)
+from arches_render.generators.terrain import landscape_evolution as le  # noqa: E402
+from arches_render.field.heightmaps import fbm_heightmap  # noqa: E402
 
 
 def _fbm(n, cell, wavelength, seed, octaves=7):

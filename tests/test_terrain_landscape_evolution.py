@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from generators.terrain import landscape_evolution as le
+from arches_render.generators.terrain import landscape_evolution as le
 
 
 def _noise(n, seed=0, amp=1.0):

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from generators.terrain.preset_choice import choose_preset, landform_scales
+from arches_render.generators.terrain.preset_choice import choose_preset, landform_scales
 
 DATA = Path(__file__).resolve().parents[1] / "scenes" / "data"
 
@@ -160,7 +160,7 @@ def test_degenerate_dems_get_an_answer_or_a_clear_error():
 
 @pytest.mark.parametrize("name", list(SHIPPED))
 def test_shipped_dems_read_with_the_dem_reader_and_are_documented(name):
-    from generators.terrain.dem_io import read_dem
+    from arches_render.field.heightmaps import read_dem
     dem = read_dem(DATA / f"{name}.npy")
     assert dem.step == 1 and dem.filled == 0  # no reduction, no hole
     np.testing.assert_array_equal(dem.heights, _load(name))

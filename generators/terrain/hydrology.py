@@ -42,8 +42,9 @@ import numpy as np
 
 __all__ = ["fill_depressions", "flow_accumulation", "slope", "stream_power", "pits"]
 
-_DI = np.array([-1, -1, -1, 0, 0, 1, 1, 1], dtype=np.int64)
-_DJ = np.array([-1, 0, 1, -1, 1, -1, 0, 1], dtype=np.int64)
+#: Row and column offsets of the eight neighbours (shared with landscape_evolution).
+NEIGHBOUR_DI = np.array([-1, -1, -1, 0, 0, 1, 1, 1], dtype=np.int64)
+NEIGHBOUR_DJ = np.array([-1, 0, 1, -1, 1, -1, 0, 1], dtype=np.int64)
 
 
 @numba.njit(cache=True)
@@ -167,7 +168,7 @@ def fill_depressions(heights, epsilon=0.0):
         raise ValueError("fill_depressions needs a 2-D array of at least 2x2 heights")
     if not np.all(np.isfinite(H)):
         raise ValueError("fill_depressions needs finite heights")
-    return _priority_flood(H, float(epsilon), _DI, _DJ)
+    return _priority_flood(H, float(epsilon), NEIGHBOUR_DI, NEIGHBOUR_DJ)
 
 
 @numba.njit(cache=True)
@@ -228,7 +229,7 @@ def flow_accumulation(heights, cell_size=1.0, exponent=1.1, fill=True):
     # An epsilon of a millionth of the cell keeps flats drainable yet far below any relief.
     Z = fill_depressions(H, epsilon=1e-6 * min(dx, dy)) if fill else H
     order = np.argsort(-Z, axis=None, kind="stable").astype(np.int64)
-    return _mfd(Z, order, dx, dy, float(exponent), _DI, _DJ)
+    return _mfd(Z, order, dx, dy, float(exponent), NEIGHBOUR_DI, NEIGHBOUR_DJ)
 
 
 def slope(heights, cell_size=1.0):
@@ -293,7 +294,7 @@ def pits(heights):
     c = H[1:-1, 1:-1]
     lower = np.ones_like(c, dtype=bool)
     ny, nx = H.shape
-    for a, b in zip(_DI, _DJ):
+    for a, b in zip(NEIGHBOUR_DI, NEIGHBOUR_DJ):
         lower &= H[1 + a:ny - 1 + a, 1 + b:nx - 1 + b] > c
     rc = np.argwhere(lower) + 1
     return rc[np.argsort(H[rc[:, 0], rc[:, 1]], kind="stable")].astype(np.int64)

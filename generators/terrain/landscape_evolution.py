@@ -80,7 +80,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from .hydrology import _DI, _DJ, _heap_pop, _heap_push
+from .hydrology import NEIGHBOUR_DI, NEIGHBOUR_DJ, heap_pop, heap_push
 
 __all__ = ["Strata", "edge_outlets", "route_flow", "stream_power_step", "thermal_erosion", "diffuse", "evolve"]
 
@@ -193,10 +193,10 @@ def _route(Z, outlet, dx, dy, di, dj):
         if outlet.flat[c]:
             key[c] = Z.flat[c]
             seen[c] = True
-            n = _heap_push(keys, vals, n, key[c], c)
+            n = heap_push(keys, vals, n, key[c], c)
     count = 0
     while n > 0:
-        kc, c, n = _heap_pop(keys, vals, n)
+        kc, c, n = heap_pop(keys, vals, n)
         order[count] = c
         count += 1
         cj, ci = c // nx, c % nx
@@ -210,7 +210,7 @@ def _route(Z, outlet, dx, dy, di, dj):
             seen[q] = True
             rec[q] = c  # the flooding cell: the way out of a pit or across a flat
             key[q] = max(Z[j, i], kc)
-            n = _heap_push(keys, vals, n, key[q], q)
+            n = heap_push(keys, vals, n, key[q], q)
     # Steepest descent on the filled surface where a strictly lower neighbour exists:
     # such a neighbour left the queue earlier (keys leave in non-decreasing order), so
     # the order stays topological.
@@ -266,7 +266,7 @@ def route_flow(heights, cell_size, outlets, inflow=None):
     if not out.any():
         raise ValueError("route_flow needs at least one outlet cell")
     c = float(cell_size)
-    rec, order, dist, filled = _route(Z, out, c, c, _DI, _DJ)
+    rec, order, dist, filled = _route(Z, out, c, c, NEIGHBOUR_DI, NEIGHBOUR_DJ)
     a0 = np.full(Z.size, c * c)
     if inflow is not None:
         a0 = a0 + np.asarray(inflow, dtype=np.float64).ravel()
@@ -409,7 +409,7 @@ def thermal_erosion(heights, cell_size, talus_deg, rate=0.125, iterations=1, fix
     H = np.ascontiguousarray(heights, dtype=np.float64)
     t = np.broadcast_to(np.tan(np.radians(np.asarray(talus_deg, dtype=np.float64))), H.shape).copy()
     f = np.zeros(H.shape, dtype=np.bool_) if fixed is None else np.ascontiguousarray(fixed, dtype=np.bool_)
-    return _thermal(H, t, f, float(cell_size), float(rate), int(iterations), _DI, _DJ)
+    return _thermal(H, t, f, float(cell_size), float(rate), int(iterations), NEIGHBOUR_DI, NEIGHBOUR_DJ)
 
 
 def diffuse(heights, cell_size, D, dt, fixed=None):
