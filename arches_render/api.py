@@ -48,6 +48,12 @@ else:  # pragma: no cover
 __all__ = ["Lookdev", "load", "compare"]
 
 
+def _fog_shape(desc):
+    """What of a scene's ``[atmosphere]`` shapes the kernels: on or off, haze layer or not."""
+    a = desc.atmosphere
+    return None if a is None else a.haze_density > 0
+
+
 def load(path, resolution=None, spp=None, seed=None) -> "Lookdev":
     """Open a scene file for lookdev.
 
@@ -220,11 +226,13 @@ class Lookdev:
         import mitsuba as mi
 
         from .render.jobs import set_camera
+        from .render.renderer import attach_atmosphere
         same = (old.render == new.render and old.meshes == new.meshes
                 and [l["type"] for l in old.lights] == [l["type"] for l in new.lights]
                 and set(old.materials) == set(new.materials)
                 and old.field_material == new.field_material
-                and (old.field is None) == (new.field is None))
+                and (old.field is None) == (new.field is None)
+                and _fog_shape(old) == _fog_shape(new))
         if same:
             for name in new.materials:
                 same &= self._edit_material(name, old, new)
@@ -243,6 +251,8 @@ class Lookdev:
         set_camera(self.scene, cam.origin, cam.target, cam.up, cam.fov)
         if new.field is not None:
             self.scene.integrator().attach(new.field, self.bsdfs[new.field_material])
+        # Its suns and sky come from the lights: re-derive them (opaque values, no compile).
+        attach_atmosphere(self.scene, new)
 
     def _edit_material(self, name, old, new) -> bool:
         """Copy a material's new values into its live BSDF; False if its code must change."""
@@ -319,6 +329,7 @@ class Lookdev:
         import mitsuba as mi
 
         from .render.jobs import set_camera
+        from .render.renderer import attach_atmosphere
         src, dst = mi.traverse(self.scene), mi.traverse(self._aov)
         for k in src.keys():
             if k.startswith("light") and k in dst:
@@ -328,6 +339,7 @@ class Lookdev:
         set_camera(self._aov, cam.origin, cam.target, cam.up, cam.fov)
         if self.desc.field is not None:
             self._aov.integrator().attach(self.desc.field, self.bsdfs[self.desc.field_material])
+        attach_atmosphere(self._aov, self.desc)
         return self._aov
 
     def _write(self, path, rgb, layers, spp, seed, view):

@@ -303,6 +303,7 @@ def test_field_agrees_with_mesh_in_fog():
     desc = load_scene(SCENES / "default.toml")
     desc.atmosphere = AtmosphereSettings(density=5.0, haze_density=0.004, haze_height=25.0)
     clear = load_scene(SCENES / "default.toml")
+    clear.atmosphere = None
     w, h, spp = 120, 68, 48
     field_scene, mesh_scene = build_scene(desc, "field", w, h), build_scene(desc, "mesh", w, h)
     assert type(mesh_scene.integrator()).__name__ == "ImplicitPathIntegrator"
@@ -345,3 +346,24 @@ def test_atmosphere_table_errors_name_the_key(table, key):
     with pytest.raises(SceneError) as err:
         parse_scene(tomllib.loads(MINI + "[atmosphere]\n" + table + "\n"), SCENES / "mini.toml")
     assert key in str(err.value)
+
+
+def test_cli_layers_and_lookdev_edits_compile_nothing(tmp_path):
+    """`render` writes the fog-free beauty and the transmittance as EXR layers; lookdev edits
+    of the atmosphere and of the sun are parameter edits (no kernel compiled)."""
+    from production_helpers import FLAT, assert_edits_compile_nothing, write_scene
+
+    from arches_render import api
+    from arches_render.cli import main
+    from arches_render.imaging.exr import read_exr
+    scene = write_scene(tmp_path, FLAT + "[atmosphere]\ndensity = 50.0\nhaze = { density = 0.02 }\n", "foggy")
+    out = tmp_path / "foggy.exr"
+    assert main(["render", str(scene), "-o", str(out), "--spp", "4", "-q"]) == 0
+    img = read_exr(out)
+    assert {"beauty_clear", "transmittance"} <= set(img.layers)
+    tr = img.layers["transmittance"][0]
+    assert np.all(np.isfinite(img.rgb)) and 0.0 < tr.min() and tr.max() < 0.9
+    look = api.load(scene, resolution=(32, 18), spp=2)
+    assert_edits_compile_nothing(look, {"atmosphere.density": 20.0, "atmosphere.haze.density": 0.05,
+                                        "lights.0.elevation": 20.0}, look.render())
+    assert look.rebuilds == 1
