@@ -57,7 +57,9 @@ differ along the segment (a slanted ray through the thin haze layer and the thic
 Rayleigh layer) the weights ``tau_k / tau`` are an approximation: exact on
 horizontal segments and for components of equal albedo and phase (aerosol and
 haze), off by the Rayleigh share times its colour difference otherwise
-(``tests/test_atmosphere.py`` measures it against quadrature). ``phi(tau)`` keeps
+(``tests/test_atmosphere.py`` measures it against quadrature at the
+physical density with a 15 m haze layer: below 0.15 % on segments up to 3 km,
+1 % on a 5 km ray skimming the ground, 2 % on a 20 km ray climbing 2.8 km). ``phi(tau)`` keeps
 the optically thin limit (``L_in -> sum tau_k omega_k S_k -> 0`` as the density
 goes to 0) free of ``0 / 0``.
 
