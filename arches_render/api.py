@@ -48,10 +48,16 @@ from .imaging.exr import read_exr
 from .imaging.preview import write_png
 from .render.jobs import set_camera
 from .render.output import render_header, write_render
-from .render.renderer import build_scene, load_materials, render_layers
+from .render.renderer import attach_atmosphere, build_scene, load_materials, render_layers
 from .scene import parse_scene, read_toml
 
 __all__ = ["Lookdev", "load", "compare"]
+
+
+def _fog_shape(desc):
+    """What of a scene's ``[atmosphere]`` shapes the kernels: on or off, haze layer or not."""
+    a = desc.atmosphere
+    return None if a is None else a.haze_density > 0
 
 
 def load(path, resolution=None, spp=None, seed=None) -> "Lookdev":
@@ -217,7 +223,8 @@ class Lookdev:
                 and [l["type"] for l in old.lights] == [l["type"] for l in new.lights]
                 and set(old.materials) == set(new.materials)
                 and old.field_material == new.field_material
-                and (old.field is None) == (new.field is None))
+                and (old.field is None) == (new.field is None)
+                and _fog_shape(old) == _fog_shape(new))
         if same:
             for name in new.materials:
                 same &= self._edit_material(name, old, new)
@@ -236,6 +243,8 @@ class Lookdev:
         set_camera(self.scene, cam.origin, cam.target, cam.up, cam.fov)
         if new.field is not None:
             self.scene.integrator().attach(new.field, self.bsdfs[new.field_material])
+        # Its suns and sky come from the lights: re-derive them (opaque values, no compile).
+        attach_atmosphere(self.scene, new)
 
     def _edit_material(self, name, old, new) -> bool:
         """Copy a material's new values into its live BSDF; False if its code must change."""
@@ -314,6 +323,7 @@ class Lookdev:
         set_camera(self._aov, cam.origin, cam.target, cam.up, cam.fov)
         if self.desc.field is not None:
             self._aov.integrator().attach(self.desc.field, self.bsdfs[self.desc.field_material])
+        attach_atmosphere(self._aov, self.desc)
         return self._aov
 
     def _write(self, path, rgb, layers, spp, seed, view):

@@ -86,3 +86,16 @@ def write_scene(folder: Path, text: str, name: str) -> Path:
     path = Path(folder) / f"{name}.toml"
     path.write_text(text)
     return path
+
+
+def assert_edits_compile_nothing(look, edits: dict, prev):
+    """Apply lookdev ``edits`` one by one: each must change the image and compile no kernel.
+    Returns the last image."""
+    import numpy as np
+    for key, value in edits.items():
+        look.set(key, value)
+        img = look.render()
+        assert look.compiled == 0, f"{key}: {look.compiled} kernels compiled"
+        assert not np.array_equal(img, prev), f"{key} changed nothing"
+        prev = img
+    return prev

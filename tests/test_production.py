@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from helpers import REPO, variant
-from production_helpers import FLAT, write_scene
+from production_helpers import FLAT, assert_edits_compile_nothing, write_scene
 
 variant()
 
@@ -182,13 +182,7 @@ def test_lookdev_api_edits_without_recompiling(flat):
     edits = {"materials.ground.rock.tint": [0.7, 0.2, 0.1], "materials.paint.color": [0.9, 0.9, 0.1],
              "lights.0.elevation": 20.0, "camera.origin": [0.5, -0.5, 9.0], "camera.fov": 50.0,
              "nodes.ball.radius": 1.4, "nodes.ball.center": [2.5, 0.5, 0.5]}
-    prev = base
-    for key, value in edits.items():
-        look.set(key, value)
-        img = look.render()
-        assert look.compiled == 0, f"{key}: {look.compiled} kernels compiled"
-        assert not np.array_equal(img, prev), f"{key} changed nothing"
-        prev = img
+    prev = assert_edits_compile_nothing(look, edits, base)
     assert look.rebuilds == 1
     # The edited session renders what a fresh load of the edited scene renders.
     fresh = api.load(flat, resolution=(32, 18), spp=2).update(edits)

@@ -24,6 +24,10 @@ def run(args) -> int:
     print(f"lights     {', '.join(l['type'] for l in desc.lights)}")
     print(f"materials  {', '.join(desc.materials)}")
     print(f"meshes     {len(desc.meshes)}")
+    if desc.atmosphere is not None:
+        a = desc.atmosphere
+        haze = f", haze {a.haze_density:g} /m over {a.haze_height:g} m" if a.haze_density > 0 else ""
+        print(f"atmosphere turbidity {a.turbidity:g}, density x{a.density:g}{haze}")
     if desc.field is None:
         print("field      none")
         return 0

@@ -16,7 +16,19 @@ layer            channels                  value (0 where the ray escapes)
 ``coverage``     field, mesh               1 where the hit is on the field / on a mesh
 ``layers``       one per material layer    composite weight ``w_i`` of each layer of the
                                            field's triplanar material (sums to 1 on the field)
+``transmittance`` R, G, B                  with an ``[atmosphere]``: transmittance ``Tr`` of
+                                           the camera ray up to its hit (misses: up to where
+                                           it leaves the scene box), 1 without fog
+``beauty_clear`` R, G, B                   with an ``[atmosphere]``: the fog-free beauty of the
+                                           same paths (no in-scatter, no extinction), for
+                                           compositing; the same estimator as a render
+                                           without ``[atmosphere]``, not the same bits
 ===============  ========================  ================================================
+
+With an atmosphere a compositor can rebuild the fogged image from layers:
+``beauty ~ beauty_clear * transmittance + in-scatter`` holds exactly for the
+camera segment, and approximately for the whole path (bounce segments are fogged
+too).
 
 Pixels on a silhouette hold the average of the surfaces they see (a normal there
 is shorter than 1, a depth between two distances): these are the usual
@@ -35,7 +47,10 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-__all__ = ["BASE_LAYERS", "aov_channel_names", "primary_aovs", "split_channels", "layer_names_of"]
+__all__ = ["BASE_LAYERS", "ATMOSPHERE_LAYERS", "aov_channel_names", "primary_aovs", "split_channels", "layer_names_of"]
+
+#: Layers of renders with an atmosphere, after the material layers (in this order).
+ATMOSPHERE_LAYERS = (("transmittance", ("R", "G", "B")), ("beauty_clear", ("R", "G", "B")))
 
 #: Layers every AOV render has, with their channel letters.
 BASE_LAYERS = (("albedo", ("R", "G", "B")), ("normal", ("X", "Y", "Z")), ("depth", ("Z",)),
@@ -48,20 +63,25 @@ def layer_names_of(bsdf) -> list[str]:
     return list(names) if names and hasattr(bsdf, "layer_weights") else []
 
 
-def aov_channel_names(field_bsdf=None) -> list[str]:
+def aov_channel_names(field_bsdf=None, atmosphere: bool = False) -> list[str]:
     """Film channel names (``layer.channel``) in the order of :func:`primary_aovs`.
 
     Parameters
     ----------
     field_bsdf : mi.BSDF or None
         The field's BSDF; a triplanar one adds a ``layers.<name>`` channel per layer.
+    atmosphere : bool
+        Whether the render has an atmosphere (adds :data:`ATMOSPHERE_LAYERS`).
 
     Returns
     -------
     list of str
     """
     out = [f"{layer}.{c}" for layer, letters in BASE_LAYERS for c in letters]
-    return out + [f"layers.{n}" for n in layer_names_of(field_bsdf)]
+    out += [f"layers.{n}" for n in layer_names_of(field_bsdf)]
+    if atmosphere:
+        out += [f"{layer}.{c}" for layer, letters in ATMOSPHERE_LAYERS for c in letters]
+    return out
 
 
 def primary_aovs(si, field_hit, valid, bsdf, field_bsdf=None, depth=None) -> list:

@@ -29,6 +29,16 @@ beauty is the same with or without them up to float rounding (the film then
 accumulates more channels in another kernel; measured: 1 ulp in a quarter of the
 pixels).
 
+With an atmosphere (:meth:`ImplicitPathIntegrator.attach_atmosphere`, see
+:mod:`arches_render.render.atmosphere`) every traced segment, camera and bounce
+rays alike, adds its closed-form in-scatter ``beta L_in`` and multiplies the
+throughput by its transmittance ``Tr``; shadow rays carry ``Tr`` of their
+segment. Meshes and field are fogged by the same code, so the mesh cross-check
+renders with this integrator whenever the atmosphere is on. With AOVs, the
+fog-free beauty of the same paths (``beauty_clear``) and the camera ray's
+transmittance (``transmittance``) are returned as well. Without an atmosphere
+none of this code is traced: the kernels are those of the fog-free integrator.
+
 References
 ----------
 Veach, E. (1997). Robust Monte Carlo methods for light transport simulation. PhD
@@ -78,11 +88,16 @@ class _ImplicitPathImpl:
         self.aovs = bool(props.get("aovs", False))
         self.tracer = None
         self.field_bsdf = None
+        self.atmosphere = None
 
     def attach(self, field, bsdf):
         """Give the integrator the field to sphere-trace and the BSDF that shades it."""
         self.tracer = SphereTracer(field, eps=self.eps, omega=self.omega, max_steps=self.max_steps)
         self.field_bsdf = bsdf
+
+    def attach_atmosphere(self, atmosphere):
+        """Fog every path segment with an :class:`~arches_render.render.atmosphere.Atmosphere` (None: off)."""
+        self.atmosphere = atmosphere
 
     # -- ray queries ------------------------------------------------------------
     def intersect(self, scene, ray, active):
@@ -133,12 +148,22 @@ class _ImplicitPathImpl:
         prev_si = dr.zeros(mi.SurfaceInteraction3f)
         prev_bsdf_pdf = mi.Float(1.0)
         prev_bsdf_delta = mi.Bool(True)
+        atm = self.atmosphere
+        # The fog-free radiance and throughput of the same path (AOV beauty_clear).
+        clear = (mi.Spectrum(0.0), mi.Spectrum(1.0)) if atm is not None and self.aovs else ()
 
         def cond(*state):
             return state[-1]
 
-        def body(ray, L, beta, eta, depth, valid_ray, prev_si, prev_bsdf_pdf, prev_bsdf_delta, active):
+        def body(ray, L, beta, eta, depth, valid_ray, prev_si, prev_bsdf_pdf, prev_bsdf_delta, clear,
+                 active):
             si, field_hit = self.intersect(scene, ray, active)
+            if clear:
+                L_c, beta_c = clear
+            if atm is not None:
+                tr, L_in = atm.segment(ray.o, ray.d, atm.segment_length(ray, si))
+                L = dr.select(active, L + beta * L_in, L)
+                beta = dr.select(active, beta * tr, beta)
 
             # Emission reached by BSDF sampling (environment or area light), MIS-weighted.
             ds = mi.DirectionSample3f(scene, si, prev_si)
@@ -148,7 +173,10 @@ class _ImplicitPathImpl:
             if self.hide_emitters:
                 visible_em &= ~((depth == 0) & ~si.is_valid())
             Le = ds.emitter.eval(si, visible_em & (prev_bsdf_pdf > 0))
-            L = dr.select(visible_em, L + beta * mis_weight(prev_bsdf_pdf, em_pdf) * Le, L)
+            w_bsdf = mis_weight(prev_bsdf_pdf, em_pdf)
+            L = dr.select(visible_em, L + beta * w_bsdf * Le, L)
+            if clear:
+                L_c = dr.select(visible_em, L_c + beta_c * w_bsdf * Le, L_c)
 
             active_next = active & si.is_valid() & (depth + 1 < self.max_depth)
             bsdf = self.bsdf_at(si, ray, field_hit)
@@ -163,6 +191,10 @@ class _ImplicitPathImpl:
             wo = si.to_local(ds.d)
             bsdf_val, bsdf_pdf = bsdf.eval_pdf(bsdf_ctx, si, wo, active_em)
             mis_em = dr.select(ds.delta, 1.0, mis_weight(ds.pdf, bsdf_pdf))
+            if clear:
+                L_c = dr.select(active_em, L_c + beta_c * mis_em * bsdf_val * em_weight, L_c)
+            if atm is not None:
+                em_weight = em_weight * atm.shadow_transmittance(si, ds)
             L = dr.select(active_em, L + beta * mis_em * bsdf_val * em_weight, L)
 
             # BSDF sampling.
@@ -171,6 +203,8 @@ class _ImplicitPathImpl:
             valid_ray |= active & si.is_valid()
             ray = si.spawn_ray(si.to_world(bs.wo))
             beta *= bsdf_weight
+            if clear:
+                beta_c *= bsdf_weight
             eta *= bs.eta
             prev_si = dr.detach(si)
             prev_bsdf_pdf = bs.pdf
@@ -179,18 +213,29 @@ class _ImplicitPathImpl:
 
             # Russian roulette.
             beta_max = dr.max(beta)
-            active_next &= beta_max != 0.0
+            # A fog-free path goes on where dense fog has zeroed the fogged throughput.
+            active_next &= (dr.max(beta_c) if clear else beta_max) != 0.0
             rr_prob = dr.minimum(beta_max * dr.square(eta), 0.95)
             rr_active = depth >= self.rr_depth
             beta[rr_active] *= dr.rcp(rr_prob)
+            if clear:
+                beta_c[rr_active] *= dr.rcp(rr_prob)
+                clear = (L_c, beta_c)
             rr_continue = sampler.next_1d() < rr_prob
             active_next &= ~rr_active | rr_continue
-            return ray, L, beta, eta, depth, valid_ray, prev_si, prev_bsdf_pdf, prev_bsdf_delta, active_next
+            return (ray, L, beta, eta, depth, valid_ray, prev_si, prev_bsdf_pdf, prev_bsdf_delta, clear,
+                    active_next)
 
         state = dr.while_loop((ray, L, beta, eta, depth, valid_ray, prev_si, prev_bsdf_pdf,
-                               prev_bsdf_delta, active), cond, body, label="implicit_path")
+                               prev_bsdf_delta, clear, active), cond, body, label="implicit_path")
         L, valid_ray = state[1], state[5]
-        return L, valid_ray, self.primary_aovs(scene, ray0, active0) if self.aovs else []
+        if not self.aovs:
+            return L, valid_ray, []
+        aovs = self.primary_aovs(scene, ray0, active0)
+        if atm is not None:
+            L_c = state[9][0]
+            aovs += [L_c.x, L_c.y, L_c.z]
+        return L, valid_ray, aovs
 
     def primary_aovs(self, scene, ray, active):
         """AOV values of the primary hit, in the order of :meth:`aov_names`."""
@@ -201,12 +246,16 @@ class _ImplicitPathImpl:
         # camera centre instead, at the unlifted hit point.
         centre = scene.sensors()[0].world_transform().translation()
         depth = dr.norm(ray.o + ray.d * si.t - centre)
-        return primary_aovs(si, field_hit, valid, bsdf, self.field_bsdf if self.tracer else None, depth)
+        out = primary_aovs(si, field_hit, valid, bsdf, self.field_bsdf if self.tracer else None, depth)
+        if self.atmosphere is not None:
+            tr = self.atmosphere.transmittance(ray.o, ray.d, self.atmosphere.segment_length(ray, si))
+            out += [tr.x, tr.y, tr.z]
+        return out
 
     def aov_names(self):
         if not self.aovs:
             return []
-        return aov_channel_names(self.field_bsdf if self.tracer else None)
+        return aov_channel_names(self.field_bsdf if self.tracer else None, self.atmosphere is not None)
 
     def to_string(self):
         return (f"ImplicitPathIntegrator[max_depth={self.max_depth}, rr_depth={self.rr_depth}, "

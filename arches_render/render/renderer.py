@@ -3,7 +3,9 @@
 ``geometry = "field"`` renders with ``implicit_path`` and sphere-traces the field;
 ``geometry = "mesh"`` renders the marching-cubes mesh of the same field with
 Mitsuba's built-in ``path`` integrator and the same camera, lights and materials.
-This mesh mode is the cross-check of the sphere tracer.
+This mesh mode is the cross-check of the sphere tracer. A scene with an
+``[atmosphere]`` renders with ``implicit_path`` in both modes (Mitsuba's ``path``
+knows no fog), so the two are fogged by the same code.
 
 Samples are taken in passes with distinct seeds (``seed * 4096 + pass``): LLVM
 variants report no progress inside one launch, and a pass is the unit of the
@@ -21,6 +23,7 @@ import numpy as np
 
 from ..mesh.polygonize import polygonize
 from .aovs import split_channels
+from .atmosphere import Atmosphere
 from .plugins import ensure_registered
 
 PASS_SPP = 16
@@ -122,19 +125,42 @@ def build_scene(desc, geometry=None, width=None, height=None, voxel=None, progre
             for k, shape in enumerate(item.shapes(bsdfs)):
                 d[f"{item.name}_{k}"] = shape
     field_bsdf = bsdfs[desc.field_material] if desc.field is not None else None
+    atmosphere = getattr(desc, "atmosphere", None)
     if geometry == "mesh" or desc.field is None:
-        d["integrator"] = {"type": "implicit_path" if aovs else "path", "max_depth": s.max_depth,
+        ours = aovs or atmosphere is not None
+        d["integrator"] = {"type": "implicit_path" if ours else "path", "max_depth": s.max_depth,
                            "rr_depth": s.rr_depth}
         if aovs:
             d["integrator"]["aovs"] = True
         if desc.field is not None:
             d["field_mesh"], _ = field_mesh_shape(desc, field_bsdf, voxel, progress)
-        return mi.load_dict(d)
-    d["integrator"] = {"type": "implicit_path", "max_depth": s.max_depth, "rr_depth": s.rr_depth,
-                       "eps": s.eps, "omega": s.omega, "aovs": bool(aovs)}
-    scene = mi.load_dict(d)
-    scene.integrator().attach(desc.field, field_bsdf)
+        scene = mi.load_dict(d)
+    else:
+        d["integrator"] = {"type": "implicit_path", "max_depth": s.max_depth, "rr_depth": s.rr_depth,
+                           "eps": s.eps, "omega": s.omega, "aovs": bool(aovs)}
+        scene = mi.load_dict(d)
+        scene.integrator().attach(desc.field, field_bsdf)
+    attach_atmosphere(scene, desc)
     return scene
+
+
+def attach_atmosphere(scene, desc) -> None:
+    """Give a built scene's integrator the atmosphere of ``desc`` (if it has one).
+
+    The fogged box is the scene's bounding box (meshes) joined with the field's
+    bounds, the same in field and mesh mode. Call again after editing lights or
+    the ``[atmosphere]`` table: the new values are opaque and re-use the kernels.
+    """
+    settings = getattr(desc, "atmosphere", None)
+    if settings is None:
+        return
+    bbox = scene.bbox()
+    lo, hi = np.array(bbox.min, np.float64), np.array(bbox.max, np.float64)
+    if desc.field is not None:
+        flo, fhi = desc.field.bounds()
+        lo = np.minimum(lo, flo) if bbox.valid() else np.asarray(flo, np.float64)
+        hi = np.maximum(hi, fhi) if bbox.valid() else np.asarray(fhi, np.float64)
+    scene.integrator().attach_atmosphere(Atmosphere.for_scene(settings, desc.lights, (lo, hi)))
 
 
 def plan_passes(spp: int, passes: int = 0) -> list[int]:

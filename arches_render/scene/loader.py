@@ -22,6 +22,18 @@ A scene file is data, never code. Top-level tables:
                  of :mod:`arches_render.generators.rocks.scene_piles`; the parsed
                  items are ``SceneDescription.tables[NAME]`` (also ``desc.NAME``)
 ``[nodes.NAME]`` field nodes (see :mod:`arches_render.scene.nodes`)
+``[atmosphere]`` aerial perspective (absent: none; math in
+                 :mod:`arches_render.render.atmosphere`): ``turbidity`` (aerosol
+                 density, [1, 10], default the first ``sunsky`` light's, else 3),
+                 ``density`` (multiplier on all extinction, >= 0, default 1),
+                 ``ground`` (height in metres below which the density is constant,
+                 default 0), ``rayleigh_height`` (8000) and ``aerosol_height``
+                 (1200, scale heights in metres, > 0), ``anisotropy`` (aerosol
+                 Henyey-Greenstein g in (-1, 1), 0.76), ``aerosol_albedo`` ([0, 1],
+                 0.9), ``ground_albedo`` (of the ground that lights the air from
+                 below, [0, 1], default the ``sunsky`` albedo, else 0.3) and an optional
+                 low haze layer ``haze = {density, height}`` (extinction at
+                 ``ground`` in 1/m, > 0, and scale height in metres, > 0, default 20)
 
 Paths are relative to the scene file. Errors name the file, the key path and the
 allowed range (:class:`~arches_render.scene.errors.SceneError`).
@@ -62,6 +74,22 @@ class RenderSettings:
 
 
 @dataclass
+class AtmosphereSettings:
+    """The ``[atmosphere]`` table (see the module docstring and :mod:`arches_render.render.atmosphere`)."""
+
+    turbidity: float = 3.0
+    density: float = 1.0
+    ground: float = 0.0
+    rayleigh_height: float = 8000.0
+    aerosol_height: float = 1200.0
+    anisotropy: float = 0.76
+    aerosol_albedo: float = 0.9
+    ground_albedo: float = 0.3
+    haze_density: float = 0.0   # 0: no haze layer
+    haze_height: float = 20.0
+
+
+@dataclass
 class Camera:
     origin: list
     target: list
@@ -85,6 +113,7 @@ class SceneDescription:
     field: object = None                                # root Node or None
     field_material: str | None = None
     tables: dict = dc_field(default_factory=dict)       # generators' [[NAME]] -> parsed items
+    atmosphere: AtmosphereSettings | None = None
 
     def __getattr__(self, name):
         # A generator's scene table reads as an attribute: desc.rock_piles.
@@ -135,6 +164,27 @@ def _light(t: Table, base_dir: Path) -> dict:
              @ mi.ScalarTransform4f().rotate([1, 0, 0], 90.0)}
     t.finish()
     return d
+
+
+def _atmosphere(t: Table, lights: list) -> AtmosphereSettings:
+    """Validate ``[atmosphere]``; turbidity and ground albedo default to the first sunsky's."""
+    sky = next((d for d in lights if d["type"] == "sunsky"), None)
+    a = AtmosphereSettings(
+        turbidity=t.number("turbidity", sky["turbidity"] if sky else 3.0, lo=1.0, hi=10.0),
+        density=t.number("density", 1.0, lo=0.0),
+        ground=t.number("ground", 0.0),
+        rayleigh_height=t.number("rayleigh_height", 8000.0, lo=0.0, lo_open=True),
+        aerosol_height=t.number("aerosol_height", 1200.0, lo=0.0, lo_open=True),
+        anisotropy=t.number("anisotropy", 0.76, lo=-1.0, hi=1.0, lo_open=True, hi_open=True),
+        aerosol_albedo=t.number("aerosol_albedo", 0.9, lo=0.0, hi=1.0),
+        ground_albedo=t.number("ground_albedo", sky["albedo"] if sky else 0.3, lo=0.0, hi=1.0))
+    haze = t.table("haze", None)
+    if haze is not None:
+        a.haze_density = haze.number("density", lo=0.0, lo_open=True)
+        a.haze_height = haze.number("height", 20.0, lo=0.0, lo_open=True)
+        haze.finish()
+    t.finish()
+    return a
 
 
 def _material(t: Table, builder) -> tuple[dict, list]:
@@ -285,6 +335,9 @@ def parse_scene(data: dict, path) -> SceneDescription:
     if not lights:
         raise root.error("lights", "at least one light is required ([[lights]] with type = sunsky, ...)")
 
+    at = root.table("atmosphere", None)
+    atmosphere = _atmosphere(at, lights) if at is not None else None
+
     nodes_tbl = root.raw("nodes", {})
     if not isinstance(nodes_tbl, dict):
         raise root.error("nodes", "must be a table of named node tables")
@@ -327,4 +380,5 @@ def parse_scene(data: dict, path) -> SceneDescription:
     return SceneDescription(file=path, name=name, description=description, render=settings,
                             camera=camera, lights=lights, materials=materials,
                             material_masks=material_masks, meshes=meshes,
-                            field=field_node, field_material=field_material, tables=tables)
+                            field=field_node, field_material=field_material, tables=tables,
+                            atmosphere=atmosphere)
