@@ -32,7 +32,9 @@ which is the distance bound to ``{f_i >= -c - sum v}`` ∪ (``{f_j >= v_j}`` ∩
 ``{f_i >= -c - sum M}``), a set holding ``{sum f >= -c}``. The same holds along a line
 (two-sided line bounds). Any ``v_j`` is rigorous (``m_j`` need not even bound
 ``f_j``); a ``v_j`` just above the minimum makes the ball nearly the operand's support
-while moving the others' level by only 1/256 of its range.
+while moving the others' level by only 1/256 of its range. Caps are asked only
+between operands that add matter (``M > 0``): next to a carving set (``M <= 0``) the
+global shift is already small, and the extra levels would only cost time.
 
 ``LocalWarp``: ``f~(p) = f(w(p))``, ``w(p) = p + delta(p) m(p)``, with
 ``delta = a W(p / lambda)`` three decorrelated fBm (as in
@@ -137,15 +139,16 @@ class Sum(Node):
             ask, plan = None, None
             if all(sups[j] is not None for j in others):
                 ask = [c + sum(sups[j] for j in others) for c in levels]
-                capped = [j for j in others if caps[j] is not None]
-                if capped:
-                    shift = sum(sups[j] if caps[j] is None else caps[j] for j in others)
+                # Caps pay only where operands add matter (M > 0): with carving sets
+                # (M <= 0) the global shift is already small.
+                plan = [j for j in others if caps[j] is not None and sups[j] > 0] if sups[i] > 0 else []
+                if plan:
+                    shift = sum(caps[j] if j in plan else sups[j] for j in others)
                     ask += [c + shift for c in levels]
-                plan = capped
-            if caps[i] is not None:
-                ask = (ask or []) + [-caps[i]]
             asks.append(ask)
             plans.append(plan)
+        for j in {j for plan in plans if plan for j in plan}:
+            asks[j] = (asks[j] or []) + [-caps[j]]
         f, answers = None, []
         for child, ask in zip(kids, asks):
             if ask is not None:  # (no levels: a culled child still skips far work)
