@@ -119,10 +119,7 @@ def test_changing_parameters_does_not_recompile():
 # Scenes with a [field]: mesh-only scenes have nothing to cross-check.
 SHIPPED_FIELDS = sorted(p.stem for p in SCENES.glob("*.toml") if "\n[field]" in p.read_text())
 # Known disagreements, kept visible: strict, so a fix turns them into failures to remove here.
-KNOWN_FIELD_MESH_BUGS = {
-    "terrain_hoodoos": "open bug (issue 4): below the central hoodoos the sphere-traced image has a dark "
-                       "patch that the mesh (any voxel down to 0.25 m) lacks; mean shift 3 %, FLIP 0.07",
-}
+KNOWN_FIELD_MESH_BUGS: dict[str, str] = {}
 
 
 @pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.xfail(strict=True, reason=KNOWN_FIELD_MESH_BUGS[n]))

@@ -59,6 +59,23 @@ HOODOOS = SkeletalSet(NOISY.a_np[:60], NOISY.a_np[:60] + [0, 0, 6], 3.0, 2.0, co
 WARPED = LocalWarp(TERRAIN, SkeletalSet([[50, 50, 5]], None, 30.0, 1.0), 2.0, 8.0, octaves=2)
 
 
+def _sculpted():
+    """Tall hoodoos *added* to the terrain, as the hoodoos preset builds them: a max-set
+    of energy 2T (it must reach above the terrain's air value -T), small radii, noise."""
+    rng = np.random.default_rng(9)
+    xy = rng.uniform(20, 80, (24, 2))
+    base = TERRAIN.elevation_np(xy[:, 0], xy[:, 1]).astype(np.float64)
+    a = np.column_stack([xy, base])
+    b = a + np.column_stack([np.zeros((24, 2)), rng.uniform(8, 20, 24)])
+    R = rng.uniform(0.8, 4.0, 24)
+    pillars = SkeletalSet(a, b, R, 2.0 * TERRAIN.T_np, core=0.5 * R, combine="max",
+                          noise=dict(amplitude=0.12, wavelength=2.7, octaves=2, seed=4))
+    return Sum(TERRAIN, pillars), pillars
+
+
+SCULPTED, PILLARS = _sculpted()
+
+
 def _pairs(n, lo, hi, seed, dmin=0.02, dmax=3.0):
     rng = np.random.default_rng(seed)
     a = rng.uniform(lo, hi, (n, 3))
@@ -158,6 +175,7 @@ LIPSCHITZ_CASES = {
     "sum": (TREE, [30, 30, -10], [70, 70, 10]),
     "local_warp": (WARPED, [20, 20, -10], [80, 80, 20]),
     "hoodoos": (HOODOOS, [0, 0, -15], [100, 100, 25]),
+    "sculpted": (SCULPTED, [10, 10, -20], [90, 90, 45]),
 }
 
 
@@ -170,7 +188,7 @@ def test_lipschitz_bound_holds(name):
     assert ratio.max() > 0.0
 
 
-@pytest.mark.parametrize("name", ["terrain", "erosion", "sum", "hoodoos"])
+@pytest.mark.parametrize("name", ["terrain", "erosion", "sum", "hoodoos", "sculpted"])
 def test_distance_bounds_are_free(name):
     """No point of the ball of radius eval_bounds(p) holds matter."""
     import drjit as dr
@@ -346,6 +364,91 @@ def test_sum_carves_and_bounds():
     np.testing.assert_allclose(np.array(TREE.bounds()), np.array(ERODED.bounds()))
     inside = np.array([[45.0, 42.5, 0.5]])
     assert evaluate(CARVE, inside)[0] < -5.0
+
+
+def _free_violation(node, p, level, direction, rng, k=12):
+    """Largest ``f + level`` found in the balls (or two-sided line segments) that
+    ``eval_bounds`` declares free of ``{f >= -level}``; and the share of points with a
+    non-zero bound."""
+    import drjit as dr
+    import mitsuba as mi
+    P = mi.Point3f(*(mi.Float(p[:, i].astype(np.float32)) for i in range(3)))
+    dv = None if direction is None else mi.Vector3f(*(float(x) for x in direction))
+    f, (d,) = node.eval_bounds(P, (level,), dv)
+    dr.eval(f, d)
+    d = d.numpy().astype(np.float64)
+    np.testing.assert_allclose(f.numpy(), evaluate(node, p), atol=1e-5)
+    sel = d > 0
+    d = np.minimum(d[sel], 1e3)
+    if direction is None:
+        dirs = rng.normal(size=(sel.sum(), k, 3))
+        dirs /= np.linalg.norm(dirs, axis=2, keepdims=True)
+        rad = d[:, None] * rng.uniform(0.0, 1.0, (sel.sum(), k)) ** (1 / 3) * 0.999
+    else:
+        dirs = np.broadcast_to(np.asarray(direction, float), (sel.sum(), k, 3))
+        rad = d[:, None] * rng.uniform(-1.0, 1.0, (sel.sum(), k)) * 0.999
+    q = (p[sel, None, :] + dirs * rad[..., None]).reshape(-1, 3)
+    return float(evaluate(node, q).max()) + level, sel.mean()
+
+
+@pytest.mark.parametrize("name, levels", [
+    ("sculpted", (0.0, 0.3)),        # the sum's caps
+    ("terrain", (-0.5, 3.9)),        # levels a cap may ask: below the surface, near T
+    ("pillars", (-0.05, -3.0)),      # max-set, threshold 0: levels below it
+    ("hoodoos", (0.5, 0.95)),        # max-set, threshold 1
+    ("noisy_sum", (-0.01, -1.0)),    # sum-set with mixed energies
+])
+def test_level_and_line_bounds_are_free(name, levels):
+    """Distance bounds at the levels the sum's caps ask (below a set's threshold) and
+    along lines: no point declared free is in the set, and the bounds are not vacuous."""
+    node = {"sculpted": SCULPTED, "terrain": TERRAIN, "pillars": PILLARS, "hoodoos": HOODOOS,
+            "noisy_sum": NOISY}[name]
+    rng = np.random.default_rng(21)
+    p = rng.uniform([10, 10, -20], [90, 90, 45], (3000, 3))
+    for direction in (None, np.array([0.6, -0.7, -0.39]), np.array([0.0, 0.0, 1.0])):
+        if direction is not None:
+            direction = direction / np.linalg.norm(direction)
+        for level in levels:
+            worst, share = _free_violation(node, p, level, direction, rng)
+            assert worst < 1e-4, f"{name} level {level}: f + c = {worst:.3g} inside a free region"
+            assert share > 0.3
+
+
+def test_rays_over_added_hoodoos_hit_within_the_step_budget():
+    """The hoodoos bug (issue 17): over a terrain with hoodoos *added* (a max-set of
+    energy 2T summed with it), the sum's distance bound was Hart's with the set's slope
+    bound (``M_set > T`` made the terrain's shifted bound vacuous), so rays crossing the
+    air above the pillars spent their 512 steps there and came back as misses (69 of
+    these 400 rays). Every ray that does not graze a surface must hit where dense
+    sampling of the field finds it. Grazing rays (``f > -0.25`` more than 2 m before the
+    hit) are left out: sphere tracing is slow along them with any rigorous bound."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from arches_render.render.sphere_tracer import SphereTracer
+    tracer = SphereTracer(SCULPTED, eps=2e-4, omega=1.6, max_steps=512)
+    rng = np.random.default_rng(3)
+    o = np.array([50.0, -75.0, 48.0])
+    target = np.column_stack([rng.uniform(20, 80, 400), rng.uniform(20, 80, 400), np.zeros(400)])
+    d = target - o
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    hit, t = tracer.trace(mi.Point3f(*map(float, o)), mi.Vector3f(*(mi.Float(d[:, i]) for i in range(3))),
+                          mi.Float(1e4), mi.Bool(True))
+    dr.eval(hit, t)
+    hit, t = hit.numpy(), t.numpy()
+    # Reference on 0.02 m samples along each ray: the first crossing of the field, and
+    # the start of the band before it where the tracer's stopping rule -f < eps t holds.
+    ts = np.arange(60.0, 200.0, 0.02)
+    f = evaluate(SCULPTED, (o + ts[:, None, None] * d[None]).reshape(-1, 3)).reshape(len(ts), -1)
+    inside = f > 0
+    found = inside.any(axis=0)
+    t_ref = ts[np.argmax(inside, axis=0)]
+    t_band = ts[np.argmax(-f < 2e-4 * ts[:, None], axis=0)]
+    grazing = np.where(ts[:, None] < t_ref[None] - 2.0, f, -np.inf).max(axis=0) > -0.25
+    check = found & ~grazing
+    assert check.mean() > 0.9
+    assert hit[check].all(), f"{(~hit[check]).sum()} of {check.sum()} rays missed the surface"
+    assert np.all(t[check] >= t_band[check] - 0.02) and np.all(t[check] <= t_ref[check] + 0.02)
 
 
 def test_same_seed_same_field_other_seed_differs():

@@ -43,9 +43,10 @@ bound of the parent + the elevation primitives' bound + the fBm's), so
 
 Distance bounds (``eval_bounds``, level ``c``): ``{f >= -c}`` is inside both
 ``{f_T >= -c}`` and ``{f_P >= -c}``, so the bound is the larger of the two.
-For ``c < T``, ``s(v) >= -c`` implies ``v >= -c / k`` (``k = min(1, T/R)``, see
+For ``0 <= c < T``, ``s(v) >= -c`` implies ``v >= -c / k`` (``k = min(1, T/R)``, see
 :mod:`.falloff`), i.e. ``z <= h + c / k``: the parent's maximum-mipmap clearance
-bounds apply to the shifted level. ``f_P >= -c`` is the box ``P`` grown by
+bounds apply to the shifted level. Below the surface (``c < 0``) ``s(v) <= S_SIGMA v``
+gives ``v >= -c / S_SIGMA`` instead. ``f_P >= -c`` is the box ``P`` grown by
 ``r_c = R sqrt(1 - ((1 - c/T)/2)^(1/3))``, whose distance is ``d(p, P) - r_c``.
 
 References
@@ -160,6 +161,7 @@ class ImplicitHeightfield(Heightfield):
         self._R, self._T = opaque_float(R), opaque_float(T)
         self._a, self._b = opaque_float(self.sig_a), opaque_float(self.sig_b)
         self._inv_k = opaque_float(1.0 / min(1.0, T / R))
+        self._inv_S = opaque_float(1.0 / sigmoid_slope(R, T))
         self._extra = opaque_float(extra_hi)
         self._inv_Lh = opaque_float(1.0 / math.sqrt(1.0 + self.slope_bound ** 2))
 
@@ -206,8 +208,10 @@ class ImplicitHeightfield(Heightfield):
             inv_drop = dr.rcp(dr.maximum(dr.abs(direction.z), 1e-7))
         ds = []
         for c in levels:
-            # f_T >= -c  =>  v >= -c / k (c < T); nothing to bound when c >= T.
-            shift = c * self._inv_k
+            # f_T >= -c  =>  v >= -c / k (0 <= c < T); nothing to bound when c >= T.
+            # Below the surface (c < 0, asked by the sum's caps) s(v) >= -c > 0 only
+            # gives v >= -c / S_SIGMA.
+            shift = c * dr.select(mi.Bool(c >= 0.0), self._inv_k, self._inv_S)
             dT = dr.maximum(-v - shift, 0.0) * self._inv_Lh
             for clearance, radius in zip(above, self._radii):
                 if direction is None:

@@ -49,6 +49,24 @@ bound the slope and the value of ``F`` in the ball of one cell edge around any p
 of the cell (:meth:`SkeletalSet.local_lipschitz`); the erosion node and the sum use
 them so that one crowded cluster does not slow rays everywhere.
 
+Distance bounds below the threshold (levels ``c`` with ``u = threshold - c > 0``, the
+set ``{F >= u}``; the sum's caps ask for them, see :mod:`.operators`). Hart's bound
+is poor there: ``|grad F|`` reaches ``e G_SLOPE / D`` (30 for the hoodoos preset), so
+the bounds are geometric, per primitive. For ``"max"``, ``{F >= u}`` is the union of
+``{F_i >= u} = {rho <= x D}``, ``x = sqrt(1 - (u / e_i)^(1/3))`` (none if ``e_i < u``);
+for ``"sum"`` only ``F_i > 0`` is implied, ``x = 1``, over the positive energies. Then
+
+    d_i >= rho(p) - x D_max                                   (D <= D_max), and
+    d_i >= min(r / 2, (rho(p) - x D(p)) / (1 + x L_D))         (with the noise at p),
+
+the second because within ``r/2`` of ``p``, ``rho`` is 1-Lipschitz and
+``|grad D| <= L_D = R A L_n / lambda (sigma_s + 2 (c + R) / r)`` (the slope bound
+above with ``r >= r(p) / 2``). It matters in the noise's margin, between the noisy
+surface and its ``D_max`` envelope, where rays graze. The loop runs over *near* lists
+(support boxes grown by one cell edge ``m``), so ``d >= min(m, min_i d_i)``, and at
+least the empty-cell distance; outside the grid, the distance to the box of all
+supports; ``FAR`` above ``value_max``.
+
 References
 ----------
 Paris, A. et al. (2019). Terrain amplification with implicit 3D features. ACM TOG
@@ -60,12 +78,15 @@ Wyvill, B., Guy, A., Galin, E. (1999). Extending the CSG tree. CGF 18(2).
 
 from __future__ import annotations
 
+import io
+from pathlib import Path
+
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
 from arches_render.atomic import atomic_write
-from arches_render.field.node import Node, opaque_float
+from arches_render.field.node import Node, box_distance, opaque_float
 from arches_render.field.noise import fbm, fbm_lipschitz, fbm_range
 from arches_render.field.primitive_set import empty_distance, grid_lists
 
@@ -73,6 +94,9 @@ from .falloff import G_SLOPE, g_dr
 
 #: Array names of the ``.npz`` format (``a`` and ``radius`` required).
 NPZ_KEYS = ("a", "b", "radius", "energy", "core", "group")
+
+#: Distance bound of an empty level set (finite, so that ``0 * FAR`` stays 0).
+FAR = 1e10
 
 
 def _noise_params(noise):
@@ -187,9 +211,25 @@ class SkeletalSet(Node):
         self.max_per_cell, self.list_len = int(count.max()), len(index)
         self._per_prim_lipschitz = self._prim_lipschitz()
         self._cell_bounds(start, count, index)
-        # Empty-space distances serve only levels below a positive threshold.
-        self._empty = (mi.Float(empty_distance(lo_p, hi_p, self.grid_lo, cell, res).astype(np.float32))
-                       if self.threshold_np > 0 else None)
+        # Levels below the threshold ({F >= u}, u > 0) exist only with positive energies:
+        # their distance bounds (module docstring) use the empty cells and, per
+        # primitive, the region that holds {F_i >= u}, over lists of the support boxes
+        # grown by one cell edge (a primitive left out is that far away).
+        self._empty = self._near = None
+        if self.value_max > 0:
+            self._empty = mi.Float(empty_distance(lo_p, hi_p, self.grid_lo, cell, res).astype(np.float32))
+            near = grid_lists(lo_p - cell, hi_p + cell, self.grid_lo, cell, res)
+            self._near = tuple(mi.UInt32(v) for v in near)
+            self.near_len = len(near[2])
+            self._reach_R = mi.Float(np.ascontiguousarray(R * (1.0 + span), dtype=np.float32))
+            if self.noise:
+                nz = self.noise
+                slope_n = fbm_lipschitz(int(nz["octaves"]), nz["lacunarity"], nz["gain"]) / nz["wavelength"]
+                self._noise_K = mi.Float(np.ascontiguousarray(R * nz["amplitude"] * slope_n, dtype=np.float32))
+                self._seg = mi.Float((np.linalg.norm(b - a, axis=1) > 0).astype(np.float32))
+            self._support_lo = [opaque_float(v) for v in self.support_lo]
+            self._support_hi = [opaque_float(v) for v in self.support_hi]
+            self._peak = opaque_float(self.value_max * (1.0 + 1e-6))  # float32 e may round up
         self._cell_L = mi.Float(self.cell_lipschitz_np.astype(np.float32) * np.float32(1.0 + 1e-6))
         self._cell_M = mi.Float(self.cell_value_max_np.astype(np.float32) * np.float32(1.0 + 1e-6))
         self._cell_edge = opaque_float(cell)
@@ -287,8 +327,9 @@ class SkeletalSet(Node):
         return 3.0 + per * min(self.max_per_cell, 8)
 
     def nbytes(self):
-        per_cell = 16 + (4 if self._empty is not None else 0)  # start, count, L, M, [empty]
-        return 64 + self.n * 12 * 4 + int(np.prod(self.res)) * per_cell + self.list_len * 4
+        per_cell = 16 + (12 if self._near is not None else 0)  # start, count, L, M, [empty, near]
+        near = (self.near_len + self.n) * 4 if self._near is not None else 0
+        return 64 + self.n * 12 * 4 + int(np.prod(self.res)) * per_cell + self.list_len * 4 + near
 
     # -- evaluation ---------------------------------------------------------------
     def _cell(self, p):
@@ -300,8 +341,10 @@ class SkeletalSet(Node):
         iz = mi.UInt32(dr.clip(fz, 0.0, rz - 1.0))
         return (iz * ry + iy) * rx + ix, inside
 
-    def _falloff(self, p, k):
-        """``g(d~)`` of primitive ``k`` at ``p`` (a value in [0, 1])."""
+    def _falloff(self, p, k, geometry=False):
+        """``g(d~)`` of primitive ``k`` at ``p`` (a value in [0, 1]); with ``geometry``,
+        ``(g, rho, r, D)``: also ``rho = max(r - c, 0)``, the distance ``r`` to the
+        skeleton and the star radius ``D(p)`` (``D_max`` where the noise is skipped)."""
         a = mi.Point3f(dr.gather(mi.Float, self._ax, k), dr.gather(mi.Float, self._ay, k),
                        dr.gather(mi.Float, self._az, k))
         ba = mi.Vector3f(dr.gather(mi.Float, self._bax, k), dr.gather(mi.Float, self._bay, k),
@@ -315,7 +358,8 @@ class SkeletalSet(Node):
         core = dr.gather(mi.Float, self._core, k)
         rho = dr.maximum(r - core, 0.0)
         if not self.noise:
-            return g_dr(dr.square(rho / R))
+            g = g_dr(dr.square(rho / R))
+            return (g, rho, r, R) if geometry else g
 
         def noisy(rho, R, core, s, off, r, k):
             u = off / dr.maximum(r, 1e-12)
@@ -323,44 +367,87 @@ class SkeletalSet(Node):
             seed = self._seed + dr.gather(mi.UInt32, self._group, k) * 7919
             n = fbm(v * self._inv_wl, int(self.noise["octaves"]), self._lac, self._gain, seed)
             D = R * (1.0 + self._amp * n)
-            return g_dr(dr.square(rho / D))
+            return g_dr(dr.square(rho / D)), D
 
         def far(rho, R, core, s, off, r, k):
-            return mi.Float(0.0)
+            return mi.Float(0.0), R * self._reach
 
-        return dr.if_stmt((rho, R, core, s, off, r, k), rho < R * self._reach, noisy, far,
+        g, D = dr.if_stmt((rho, R, core, s, off, r, k), rho < R * self._reach, noisy, far,
                           label="star_noise")
+        return (g, rho, r, D) if geometry else g
+
+    def _level_bound(self, k, e, geometry, u):
+        """Lower bound of the distance from ``p`` to ``{F_k >= u}`` (``u > 0``), or
+        ``None`` where primitive ``k`` cannot reach ``u`` (module docstring, "Distance
+        bounds"): returns ``(acts, bound)``."""
+        _, rho, r, D = geometry
+        if self.combine == "max":
+            x = dr.sqrt(dr.maximum(1.0 - dr.cbrt(dr.minimum(u / dr.maximum(e, 1e-30), 1.0)), 0.0))
+            acts = e >= u
+        else:
+            x, acts = 1.0, e > 0.0
+        bound = rho - x * dr.gather(mi.Float, self._reach_R, k)  # with D_max
+        if self.noise:
+            # With the noise at p: within r/2 of p, |grad D| <= K (sigma_s + 2 (c + R) / r).
+            lip_D = dr.gather(mi.Float, self._noise_K, k) * (
+                dr.gather(mi.Float, self._seg, k) + 2.0 * (dr.gather(mi.Float, self._core, k)
+                                                           + dr.gather(mi.Float, self._R, k))
+                * dr.rcp(dr.maximum(r, 1e-12)))
+            local = dr.minimum(0.5 * r, (rho - x * D) * dr.rcp(1.0 + x * lip_D))
+            bound = dr.maximum(bound, local)
+        return acts, bound
 
     def field(self, p):
         """Combined field ``F(p)`` (before the threshold) as ``mi.Float``."""
+        return self._accumulate(p, (self._start, self._count, self._index))[0]
+
+    def _accumulate(self, p, lists, us=()):
+        """``(F(p), ds)``: the field over the cell lists ``lists`` (CSR ``start, count,
+        index``) and, for each ``u`` of ``us``, the smallest :meth:`_level_bound` over
+        them (``FAR`` where none acts). Primitives listed but not touching ``p`` add
+        exactly 0, so the near lists give the same ``F`` as the cell lists."""
+        start_a, count_a, index_a = lists
         cell, inside = self._cell(p)
-        start = dr.gather(mi.UInt32, self._start, cell)
-        count = dr.select(inside, dr.gather(mi.UInt32, self._count, cell), 0)
+        start = dr.gather(mi.UInt32, start_a, cell)
+        count = dr.select(inside, dr.gather(mi.UInt32, count_a, cell), 0)
 
+        def visit(k, ds):
+            e = dr.gather(mi.Float, self._e, k)
+            if not us:
+                return e, self._falloff(p, k), ds
+            geometry = self._falloff(p, k, True)
+            out = []
+            for u, d in zip(us, ds):
+                acts, bound = self._level_bound(k, e, geometry, u)
+                out.append(dr.select(acts, dr.minimum(d, bound), d))
+            return e, geometry[0], tuple(out)
+
+        far = tuple(mi.Float(FAR) for _ in us)
         if self.combine == "max" or not self.grouped:
-            def body(i, acc):
-                k = dr.gather(mi.UInt32, self._index, start + i)
-                v = dr.gather(mi.Float, self._e, k) * self._falloff(p, k)
-                return i + 1, (dr.maximum(acc, v) if self.combine == "max" else acc + v)
+            def body(i, acc, *ds):
+                k = dr.gather(mi.UInt32, index_a, start + i)
+                e, gk, ds = visit(k, ds)
+                v = e * gk
+                return (i + 1, dr.maximum(acc, v) if self.combine == "max" else acc + v, *ds)
 
-            _, acc = dr.while_loop((mi.UInt32(0), mi.Float(0.0)), lambda i, acc: i < count, body,
-                                   label="skeletal_set")
-            return acc
+            _, acc, *ds = dr.while_loop((mi.UInt32(0), mi.Float(0.0), *far), lambda i, *_: i < count,
+                                        body, label="skeletal_set")
+            return acc, ds
 
-        def body_g(i, acc, cur_g, best, cur_e):
-            k = dr.gather(mi.UInt32, self._index, start + i)
+        def body_g(i, acc, cur_g, best, cur_e, *ds):
+            k = dr.gather(mi.UInt32, index_a, start + i)
             grp = dr.gather(mi.UInt32, self._group, k)
-            gk = self._falloff(p, k)
+            e, gk, ds = visit(k, ds)
             new = grp != cur_g
             acc = acc + dr.select(new, cur_e * best, 0.0)
             best = dr.select(new, gk, dr.maximum(best, gk))
-            cur_e = dr.select(new, dr.gather(mi.Float, self._e, k), cur_e)
-            return i + 1, acc, grp, best, cur_e
+            cur_e = dr.select(new, e, cur_e)
+            return (i + 1, acc, grp, best, cur_e, *ds)
 
-        _, acc, _, best, cur_e = dr.while_loop(
-            (mi.UInt32(0), mi.Float(0.0), mi.UInt32(0xFFFFFFFF), mi.Float(0.0), mi.Float(0.0)),
+        _, acc, _, best, cur_e, *ds = dr.while_loop(
+            (mi.UInt32(0), mi.Float(0.0), mi.UInt32(0xFFFFFFFF), mi.Float(0.0), mi.Float(0.0), *far),
             lambda i, *_: i < count, body_g, label="skeletal_curves")
-        return acc + cur_e * best
+        return acc + cur_e * best, ds
 
     def eval(self, p):
         return self.field(p) - self._threshold
@@ -375,20 +462,33 @@ class SkeletalSet(Node):
 
     def eval_bounds(self, p, levels, direction=None):
         # Local Hart bound: min(r, (-f - c) / L_local) (the ball of radius r has slope
-        # <= L_local). {F - T >= -c} also needs F > 0 when c < T, i.e. a primitive's
-        # support: the empty-cell distance bounds that (as in CapsuleSet).
-        f = self.eval(p)
-        cell, _ = self._cell(p)
-        empty = dr.gather(mi.Float, self._empty, cell) if self._empty is not None else None
+        # <= L_local). Levels below the threshold ({F >= u}, u > 0) add the geometric
+        # bounds of the module docstring ("Distance bounds"), from the same loop that
+        # evaluates F (over the near lists).
+        us = [self._threshold - c for c in levels] if self._near is not None else []
+        if us:
+            F, geo = self._accumulate(p, self._near, us)
+            f = F - self._threshold
+        else:
+            f = self.eval(p)
         L, _, r = self.local_lipschitz(p)
         inv = dr.rcp(dr.maximum(L, 1e-12))
         ds = []
         for c in levels:
             d = dr.minimum(dr.maximum(-f - c, 0.0) * inv, r)
-            d = dr.maximum(d, dr.maximum(-f - c, 0.0) * (1.0 / self.lipschitz))
-            if empty is not None:
-                d = dr.select(self._threshold - c > 0.0, dr.maximum(d, empty), d)
-            ds.append(d)
+            ds.append(dr.maximum(d, dr.maximum(-f - c, 0.0) * (1.0 / self.lipschitz)))
+        if us:
+            cell, inside = self._cell(p)
+            empty = dr.gather(mi.Float, self._empty, cell)
+            outside = box_distance(p, self._support_lo, self._support_hi)
+            # A primitive left out of the near list is at least one cell edge away.
+            geo = [dr.select(inside, dr.maximum(dr.minimum(dr.maximum(g, 0.0), self._cell_edge), empty),
+                             outside) for g in geo]
+            ds = [dr.select(u > self._peak, FAR, dr.select(u > 0.0, dr.maximum(d, g), d))
+                  for d, g, u in zip(ds, geo, us)]
+        elif levels and self.value_max <= 0:
+            # No positive energy: {F >= u} is empty for every u > 0.
+            ds = [dr.select(self._threshold - c > 0.0, FAR, d) for d, c in zip(ds, levels)]
         return f, tuple(ds)
 
     def __repr__(self):
@@ -406,9 +506,6 @@ def _per_prim(v, n, name):
 
 def save_npz(path, **arrays) -> None:
     """Write primitive arrays (``NPZ_KEYS``) to ``path`` atomically (no pickles)."""
-    import io
-    from pathlib import Path
-
     unknown = set(arrays) - set(NPZ_KEYS)
     if unknown:
         raise ValueError(f"unknown array(s) {sorted(unknown)}; allowed: {', '.join(NPZ_KEYS)}")
