@@ -39,7 +39,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from timing import random_points, timed_eval  # noqa: E402  (benchmarks/ is on sys.path as the script folder)
+from timing import median_renders, random_points, timed_eval  # noqa: E402  (benchmarks/ is on sys.path as the script folder)
 
 
 def tree20():
@@ -97,23 +97,16 @@ def bench_field_evals_set10k(repeat):
 
 
 def bench_render_field_vs_mesh(repeat):
-    from arches_render.render.renderer import build_scene, render_image
+    from arches_render.render.renderer import build_scene
     from arches_render.scene import load_scene
     desc = load_scene(REPO / "scenes" / "default.toml")
     w, h, spp = 320, 180, 16
-    out = {}
+    out, scenes = {}, []
     for geometry in ("field", "mesh"):
         t0 = time.perf_counter()
-        scene = build_scene(desc, geometry, w, h)
-        setup = time.perf_counter() - t0
-        render_image(scene, 4, seed=99)  # compile
-        times = []
-        for i in range(repeat):
-            t = time.perf_counter()
-            render_image(scene, spp, seed=i)
-            times.append(time.perf_counter() - t)
-        out[geometry] = statistics.median(times)
-        out[geometry + "_setup"] = setup
+        scenes.append(build_scene(desc, geometry, w, h))
+        out[geometry + "_setup"] = time.perf_counter() - t0
+    out["field"], out["mesh"] = median_renders(scenes, spp, repeat)
     return dict(value=out["field"] / out["mesh"], unit="x", baseline=2.0, baseline_is="goal",
                 field_s=out["field"], mesh_s=out["mesh"], mesh_setup_s=out["mesh_setup"],
                 resolution=f"{w}x{h}", spp=spp)

@@ -77,8 +77,9 @@ class SphereTracer:
         self.omega = float(omega)
         self.max_steps = int(max_steps)
 
-    def trace(self, o, d, tmax, active):
-        """First hit of the rays ``o + t d`` (``|d| = 1``) with ``0 <= t <= tmax``.
+    def trace(self, o, d, tmax, active, tmin=None):
+        """First hit of the rays ``o + t d`` (``|d| = 1``) with ``0 <= t <= tmax``
+        (and ``t >= tmin`` where given: the caller proved ``[0, tmin)`` free).
 
         Returns
         -------
@@ -88,7 +89,7 @@ class SphereTracer:
         import drjit as dr
         import mitsuba as mi
         t_in, t_out = ray_box(o, d, self.lo_op, self.hi_op)
-        t_start = dr.maximum(t_in, 0.0)
+        t_start = dr.maximum(t_in, 0.0 if tmin is None else tmin)
         t_end = dr.minimum(t_out, tmax)
         active = mi.Bool(active) & (t_start <= t_end)
         omega0 = mi.Float(self.omega)
@@ -121,6 +122,10 @@ class SphereTracer:
                  mi.Bool(False), active, mi.UInt32(0), mi.Point3f(o), mi.Vector3f(d), t_end)
         t, _, _, _, _, hit, _, _, _, _, _ = dr.while_loop(state, cond, body, label="sphere_trace")
         return hit & active, t
+
+    def occluded(self, o, d, tmax, active):
+        """Whether the segments ``o + t d``, ``0 <= t <= tmax``, meet the surface."""
+        return self.trace(o, d, tmax, active)[0]
 
     def surface(self, p, t, d=None):
         """Surface point and outward normal for hits ``p`` found at distance ``t``
