@@ -291,6 +291,31 @@ def test_far_leaves_bound_their_operand():
     assert np.all(b <= bound + 1e-5)
 
 
+@pytest.mark.parametrize("leaf", [F.Capsule([1.0, -2.0, 0.5], [-3.0, 4.0, 2.0], 1.2), F.Sphere([0.5, 1.0, 2.0], 1.5),
+                                  F.Box([0.0, 0.0, 1.0], [2.0, 1.0, 0.5], rounding=0.3)])
+def test_leaf_spans_contain_the_grown_leaf(leaf):
+    """Every sampled point of a ray inside ``{leaf >= -grow}`` lies in its span."""
+    from arches_render.render.heightfield_caster import _grown_box, _leaf_span
+    grow = 2.5
+    rng = np.random.default_rng(4)
+    n = 3000
+    o = rng.normal(size=(n, 3)) * 12.0
+    o[: n // 3] *= 300.0  # far origins
+    d = rng.normal(0, 4.0, (n, 3)) - o
+    d[n // 3: n // 2] = [0.0, 0.0, 1.0]  # some axis-aligned and axis-parallel rays
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    e0, e1 = _leaf_span(leaf, mi.Float(grow), _grown_box(leaf, grow), _vec(o, mi.Point3f), _vec(d, mi.Vector3f))
+    e0, e1 = e0.numpy(), e1.numpy()
+    # Sample around the leaf only: from the closest approach to the origin of the ray.
+    t_mid = np.maximum(-(o * d).sum(1), 0.0)
+    ts = t_mid[:, None] + np.linspace(-25.0, 25.0, 2001)[None]
+    pts = o[:, None] + ts[..., None] * d[:, None]
+    inside = (evaluate(leaf, pts.reshape(-1, 3)) >= -grow).reshape(ts.shape) & (ts >= 0.0)
+    assert inside.any(1).mean() > 0.2
+    covered = (ts >= e0[:, None]) & (ts <= e1[:, None])
+    assert np.all(covered[inside])
+
+
 def test_cast_is_bitwise_deterministic():
     root, hf = arch_scene()
     o, d = ray_families(hf, 3000, seed=8)["outside"]

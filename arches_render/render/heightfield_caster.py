@@ -117,13 +117,13 @@ class HeightfieldCaster:
         hf = plan.heightfield
         self.mipmap = MaxMipmap(hf.heights_np)
         self.top = self.mipmap.levels - 1
-        self.nx, self.ncx, self.ncy = hf.nx, hf.nx - 1, hf.ny - 1
+        self.ncx, self.ncy = hf.nx - 1, hf.ny - 1
         self._max = mi.Float(self.mipmap.max_flat)
         self._min = mi.Float(self.mipmap.min_flat)
         self._off = mi.UInt32(self.mipmap.offsets)
         self._corners = mi.Float(self.mipmap.corners.ravel())
         # The field's own arrays and parameters: the patch test repeats its arithmetic.
-        self._data, self._x0, self._y0 = hf._data, hf._x0, hf._y0
+        self._x0, self._y0 = hf._x0, hf._y0
         self._inv_dx, self._inv_dy = hf._inv_dx, hf._inv_dy
         self._dx, self._dy = dr.opaque(mi.Float, hf.dx), dr.opaque(mi.Float, hf.dy)
         op = lambda v: [dr.opaque(mi.Float, float(x)) for x in v]  # noqa: E731
@@ -215,8 +215,9 @@ class HeightfieldCaster:
             the start point (secondary and shadow rays leave the surface)."""
             p = o + d * t
             low = t > t_in
-            ci = dr.clip(Int(dr.floor((p.x - self._x0) * self._inv_dx)), 0, self.ncx - 1)
-            cj = dr.clip(Int(dr.floor((p.y - self._y0) * self._inv_dy)), 0, self.ncy - 1)
+            # Clamp before converting: far points must not overflow the integers.
+            ci = Int(dr.clip(dr.floor((p.x - self._x0) * self._inv_dx), 0.0, self.ncx - 1.0))
+            cj = Int(dr.clip(dr.floor((p.y - self._y0) * self._inv_dy), 0.0, self.ncy - 1.0))
             return dr.select(low, 0, Int(top)), dr.select(low, ci, 0), dr.select(low, cj, 0)
 
         if not self.hybrid:
@@ -327,7 +328,7 @@ class HeightfieldCaster:
         inv = mi.Vector3f(dr.rcp(d.x), dr.rcp(d.y), dr.rcp(d.z))
         sx = dr.select(d.x >= 0.0, Int(1), Int(-1))
         sy = dr.select(d.y >= 0.0, Int(1), Int(-1))
-        top, ncx, ncy, nx = self.top, self.ncx, self.ncy, self.nx
+        top, ncx, ncy = self.top, self.ncx, self.ncy
         x0, y0, dx, dy = self._x0, self._y0, self._dx, self._dy
         max_iter = self._max_iter
 
@@ -345,7 +346,7 @@ class HeightfieldCaster:
             ty = dr.select(d.y != 0.0, (ey - o.y) * inv.y, inf)
             t_wall = dr.minimum(tx, ty)
             t_exit = dr.minimum(t_wall, t_hi)
-            nxl, nyl = cells(lvl)
+            nxl, _ = cells(lvl)
             k = dr.gather(UInt, self._off, UInt(lvl), alive) + UInt(cj * nxl + ci)
             zmax = dr.gather(Float, self._max, k, alive)
             za, zb = o.z + d.z * t, o.z + d.z * t_exit
@@ -460,43 +461,45 @@ def _leaf_span(node, grow, box, o, d):
         return dr.select(t0 <= t1, t0, inf), dr.select(t0 <= t1, t1, -inf)
 
     def ball(c, R):
+        # Closest approach first (no cancellation of large |o - c|).
         w = o - c
-        b = dr.dot(w, d)
-        disc = b * b - (dr.squared_norm(w) - R * R)
+        b = -dr.dot(w, d)
+        disc = R * R - dr.squared_norm(w + d * b)
         sq = dr.sqrt(dr.maximum(disc, 0.0))
         ok = disc >= 0.0
-        return dr.select(ok, -b - sq, inf), dr.select(ok, -b + sq, -inf)
+        return dr.select(ok, b - sq, inf), dr.select(ok, b + sq, -inf)
 
     if type(node) is Sphere:
-        return ball(node.c, node.r + grow)
-    if type(node) is not Capsule:
-        return None
-    R = node.r + grow
-    axis = node.b - node.a
-    length = dr.norm(axis)
-    u = axis / dr.maximum(length, 1e-20)
-    w = o - node.a
-    du, wu = dr.dot(d, u), dr.dot(w, u)
-    dp, wp = d - u * du, w - u * wu
-    A, B, C = dr.squared_norm(dp), dr.dot(wp, dp), dr.squared_norm(wp) - R * R
-    disc = B * B - A * C
-    sq = dr.sqrt(dr.maximum(disc, 0.0))
-    parallel = A < 1e-12
-    c0 = dr.select(parallel, dr.select(C <= 0.0, -inf, inf), (-B - sq) / A)
-    c1 = dr.select(parallel, dr.select(C <= 0.0, inf, -inf), (-B + sq) / A)
-    c0, c1 = dr.select(parallel | (disc >= 0.0), c0, inf), dr.select(parallel | (disc >= 0.0), c1, -inf)
-    # Slab 0 <= (p - a).u <= length.
-    inv = dr.rcp(du)
-    s0, s1 = -wu * inv, (length - wu) * inv
-    flat = dr.abs(du) < 1e-12
-    inside_slab = (wu >= 0.0) & (wu <= length)
-    s_lo = dr.select(flat, dr.select(inside_slab, -inf, inf), dr.minimum(s0, s1))
-    s_hi = dr.select(flat, dr.select(inside_slab, inf, -inf), dr.maximum(s0, s1))
-    k0, k1 = dr.maximum(c0, s_lo), dr.minimum(c1, s_hi)
-    a0, a1 = ball(node.a, R)
-    b0, b1 = ball(node.b, R)
-    lo = dr.minimum(dr.select(k0 <= k1, k0, inf), dr.minimum(a0, b0))
-    hi = dr.maximum(dr.select(k0 <= k1, k1, -inf), dr.maximum(a1, b1))
-    # Rounding: widen by a millimetre-scale relative margin (certifies a hair less).
-    pad = 1e-5 * (dr.abs(lo) + R) + 1e-5
+        lo, hi = ball(node.c, node.r + grow)
+        R = node.r + grow
+    else:
+        R = node.r + grow
+        axis = node.b - node.a
+        length = dr.norm(axis)
+        u = axis / dr.maximum(length, 1e-20)
+        w = o - node.a
+        du, wu = dr.dot(d, u), dr.dot(w, u)
+        dp, wp = d - u * du, w - u * wu  # components across the axis
+        A = dr.squared_norm(dp)
+        parallel = A < 1e-12
+        s_c = -dr.dot(wp, dp) / dr.maximum(A, 1e-30)  # closest approach to the axis line
+        disc = R * R - dr.squared_norm(wp + dp * s_c)
+        half = dr.sqrt(dr.maximum(disc, 0.0) / dr.maximum(A, 1e-30))
+        near_axis = dr.squared_norm(wp) <= R * R
+        c0 = dr.select(parallel, dr.select(near_axis, -inf, inf), dr.select(disc >= 0.0, s_c - half, inf))
+        c1 = dr.select(parallel, dr.select(near_axis, inf, -inf), dr.select(disc >= 0.0, s_c + half, -inf))
+        # Slab 0 <= (p - a).u <= length.
+        inv = dr.rcp(du)
+        s0, s1 = -wu * inv, (length - wu) * inv
+        flat = dr.abs(du) < 1e-12
+        inside_slab = (wu >= 0.0) & (wu <= length)
+        s_lo = dr.select(flat, dr.select(inside_slab, -inf, inf), dr.minimum(s0, s1))
+        s_hi = dr.select(flat, dr.select(inside_slab, inf, -inf), dr.maximum(s0, s1))
+        k0, k1 = dr.maximum(c0, s_lo), dr.minimum(c1, s_hi)
+        a0, a1 = ball(node.a, R)
+        b0, b1 = ball(node.b, R)
+        lo = dr.minimum(dr.select(k0 <= k1, k0, inf), dr.minimum(a0, b0))
+        hi = dr.maximum(dr.select(k0 <= k1, k1, -inf), dr.maximum(a1, b1))
+    # Rounding: widen by a relative margin (certifies a hair less).
+    pad = 1e-5 * (dr.select(dr.isfinite(lo), dr.abs(lo), 0.0) + R) + 1e-4
     return lo - pad, hi + pad

@@ -77,9 +77,8 @@ class SphereTracer:
         self.omega = float(omega)
         self.max_steps = int(max_steps)
 
-    def trace(self, o, d, tmax, active, tmin=None):
-        """First hit of the rays ``o + t d`` (``|d| = 1``) with ``0 <= t <= tmax``
-        (and ``t >= tmin`` where given: the caller proved ``[0, tmin)`` free).
+    def trace(self, o, d, tmax, active):
+        """First hit of the rays ``o + t d`` (``|d| = 1``) with ``0 <= t <= tmax``.
 
         Returns
         -------
@@ -89,7 +88,7 @@ class SphereTracer:
         import drjit as dr
         import mitsuba as mi
         t_in, t_out = ray_box(o, d, self.lo_op, self.hi_op)
-        t_start = dr.maximum(t_in, 0.0 if tmin is None else tmin)
+        t_start = dr.maximum(t_in, 0.0)
         t_end = dr.minimum(t_out, tmax)
         active = mi.Bool(active) & (t_start <= t_end)
         omega0 = mi.Float(self.omega)
