@@ -331,6 +331,7 @@ class HeightfieldCaster:
         top, ncx, ncy = self.top, self.ncx, self.ncy
         x0, y0, dx, dy = self._x0, self._y0, self._dx, self._dy
         max_iter = self._max_iter
+        offsets = [int(v) for v in self.mipmap.offsets]
 
         def cells(lvl):
             # Cells per row and column at level lvl: ceil(n / 2^lvl).
@@ -347,7 +348,10 @@ class HeightfieldCaster:
             t_wall = dr.minimum(tx, ty)
             t_exit = dr.minimum(t_wall, t_hi)
             nxl, _ = cells(lvl)
-            k = dr.gather(UInt, self._off, UInt(lvl), alive) + UInt(cj * nxl + ci)
+            off = UInt(0)
+            for l_, o_ in enumerate(offsets):
+                off = dr.select(lvl == l_, UInt(o_), off) if l_ else off
+            k = off + UInt(cj * nxl + ci)
             zmax = dr.gather(Float, self._max, k, alive)
             za, zb = o.z + d.z * t, o.z + d.z * t_exit
             zlow = dr.minimum(za, zb)
@@ -355,29 +359,34 @@ class HeightfieldCaster:
             touch = alive & ~empty & (zlow <= zmax)
             leaf = touch & (lvl == 0)
 
-            # Exact ray-patch test on [t, t_exit] (module docstring).
-            h00, h10, h01, h11 = dr.gather(mi.Vector4f, self._corners, UInt(cj * ncx + ci), leaf)
-            ua = (o.x + d.x * t - x0) * self._inv_dx - Float(ci)
-            va = (o.y + d.y * t - y0) * self._inv_dy - Float(cj)
-            C = dr.lerp(dr.lerp(h00, h10, ua), dr.lerp(h01, h11, ua), va) - za
-            du, dv = d.x * self._inv_dx, d.y * self._inv_dy
-            bu, bv, e = h10 - h00, h01 - h00, (h11 - h01) - (h10 - h00)
-            B = bu * du + bv * dv + e * (ua * dv + va * du) - d.z
-            A = e * du * dv
-            sb = dr.maximum(t_exit - t, 0.0)
-            g1 = C + sb * (B + A * sb)
-            s_star = -B / (2.0 * A)
-            inner = (A != 0.0) & (s_star > 0.0) & (s_star < sb)
-            cap = inner & (A < 0.0)
-            gmax = dr.select(cap, C + s_star * (B + A * s_star), -inf)
-            patch = leaf & ((C >= 0.0) | (g1 >= 0.0) | (gmax >= 0.0))
-            # The monotone bracket [lo, hi] holding the first root.
-            lo = dr.select(inner & (A > 0.0), s_star, 0.0)
-            hi = dr.select(cap & (gmax >= 0.0), s_star, sb)
-            sq = dr.sqrt(dr.maximum(dr.fma(B, B, -4.0 * A * C), 0.0))
-            root = dr.select(B >= 0.0, -2.0 * C / (B + sq), (sq - B) / (2.0 * A))
-            root = dr.select(dr.isfinite(root), dr.clip(root, lo, hi), hi)
-            s_hit = dr.select(C >= 0.0, 0.0, root)
+            # Exact ray-patch test on [t, t_exit] (module docstring), skipped by
+            # SIMD packets without a lane at level 0.
+            def patch_test(t, t_exit, za, ci, cj, leaf):
+                h00, h10, h01, h11 = dr.gather(mi.Vector4f, self._corners, UInt(cj * ncx + ci), leaf)
+                ua = (o.x + d.x * t - x0) * self._inv_dx - Float(ci)
+                va = (o.y + d.y * t - y0) * self._inv_dy - Float(cj)
+                C = dr.lerp(dr.lerp(h00, h10, ua), dr.lerp(h01, h11, ua), va) - za
+                du, dv = d.x * self._inv_dx, d.y * self._inv_dy
+                bu, bv, e = h10 - h00, h01 - h00, (h11 - h01) - (h10 - h00)
+                B = bu * du + bv * dv + e * (ua * dv + va * du) - d.z
+                A = e * du * dv
+                sb = dr.maximum(t_exit - t, 0.0)
+                g1 = C + sb * (B + A * sb)
+                s_star = -B / (2.0 * A)
+                inner = (A != 0.0) & (s_star > 0.0) & (s_star < sb)
+                cap = inner & (A < 0.0)
+                gmax = dr.select(cap, C + s_star * (B + A * s_star), -inf)
+                patch = leaf & ((C >= 0.0) | (g1 >= 0.0) | (gmax >= 0.0))
+                # The monotone bracket [lo, hi] holding the first root.
+                lo = dr.select(inner & (A > 0.0), s_star, 0.0)
+                hi = dr.select(cap & (gmax >= 0.0), s_star, sb)
+                sq = dr.sqrt(dr.maximum(dr.fma(B, B, -4.0 * A * C), 0.0))
+                root = dr.select(B >= 0.0, -2.0 * C / (B + sq), (sq - B) / (2.0 * A))
+                root = dr.select(dr.isfinite(root), dr.clip(root, lo, hi), hi)
+                return patch, dr.select(C >= 0.0, 0.0, root)
+
+            patch, s_hit = dr.if_stmt((t, t_exit, za, ci, cj, leaf), leaf, patch_test,
+                                      lambda *a: (mi.Bool(False), Float(0.0)), label="hf_patch")
 
             # Certain hit for shadow rays: the ray sinks below the cell's minimum.
             hit_now = patch
