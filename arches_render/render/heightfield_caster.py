@@ -198,6 +198,9 @@ class HeightfieldCaster:
         of its own inside one outer loop, so that one iteration of a SIMD packet
         pays for one mode's code, not for all three.
         """
+        # Loop bodies rebind their state (``a = a & b``), never update it in place
+        # (``a &= b``): an in-place update would also change the caller's array that
+        # was passed in as loop state.
         import drjit as dr
         import mitsuba as mi
         Int, UInt, Float, Bool = mi.Int32, mi.UInt32, mi.Float, mi.Bool
@@ -232,7 +235,7 @@ class HeightfieldCaster:
         z0, z1 = ray_box(o, d, *self._zone)
         misses_zone = (z0 > z1) | (z1 < 0.0) | (z0 > t_end)
         t0 = dr.maximum(f_in, 0.0)
-        eps, omega0, min_cast = self.eps, self.omega, self._min_cast
+        eps, omega0, min_cast, max_steps = self.eps, self.omega, self._min_cast, self.sphere.max_steps
 
         # Exact entry/exit of the rays through the grown leaves that have one.
         spans = [_leaf_span(node, level, box, o, d) for node, level, box in self._leaves]
@@ -258,10 +261,10 @@ class HeightfieldCaster:
             return (cert >= min_cast, seg_end, dr.maximum(t_seg, ta), dr.minimum(seg_end, tb),
                     near_end)
 
-        def near(t, t_prev, r_prev, step, omega, found, t_hit, alive, leave, near_end):
-            """One over-relaxed sphere step on the full field (as :class:`SphereTracer`);
-            past ``near_end``, a long free step hands the lane back to probing at its
-            verified end."""
+        def near(t, t_prev, r_prev, step, omega, found, t_hit, alive, leave, near_end, i):
+            """One over-relaxed sphere step on the full field (as :class:`SphereTracer`,
+            with its step budget: a lane that exhausts it is a miss); past ``near_end``,
+            a long free step hands the lane back to probing at its verified end."""
             f, (r,) = self.field.eval_bounds(o + d * t, (0.0,), d)
             failed = (omega > 1.0) & (r + r_prev < step)
             new_hit = ~failed & ((-f < eps * t) | (f >= 0.0))
@@ -272,11 +275,11 @@ class HeightfieldCaster:
             t_prev, r_prev = dr.select(failed, t_prev, t), dr.select(failed, r_prev, r)
             omega = dr.select(failed, 1.0, omega)
             done = ~failed & ~new_hit & ~leave & (t >= t_end)
-            found |= alive & new_hit
+            found = found | (alive & new_hit)
             t_hit = dr.select(alive & new_hit, t, t_hit)
             t = dr.select(new_hit, t, t_next)
-            return (t, t_prev, r_prev, step, omega, found, t_hit, alive & ~new_hit & ~done & ~leave, leave,
-                    near_end)
+            alive = alive & (~new_hit & ~done & ~leave & (i + 1 < max_steps))
+            return t, t_prev, r_prev, step, omega, found, t_hit, alive, leave, near_end, i + 1
 
         def outer(t, t_hi, t_seg, mode, found, t_hit, alive, it):
             # CAST: finish the current stretch.
@@ -284,9 +287,9 @@ class HeightfieldCaster:
                                Bool(False), UInt(0)), lambda *s: s[7], cast, label="hf_cast")
             casting = alive & (mode == CAST)
             found, t_hit = c[5], c[6]
-            alive &= ~found
+            alive = alive & ~found
             mode = dr.select(casting & c[8], PROBE, mode)
-            alive &= ~(casting & c[8] & (t_seg >= t_end))
+            alive = alive & ~(casting & c[8] & (t_seg >= t_end))
             # PROBE.
             probing = alive & (mode == PROBE)
             long, seg_end, lo, hi, near_end = probe(t_seg, probing)
@@ -295,15 +298,16 @@ class HeightfieldCaster:
             t, t_hi = dr.select(go, lo, t), dr.select(go, hi, t_hi)
             t_seg = dr.select(probing & long, seg_end, t_seg)
             # A certified stretch off the heightfield's box holds no surface.
-            alive &= ~(probing & long & ~go & (seg_end >= t_end))
+            alive = alive & ~(probing & long & ~go & (seg_end >= t_end))
             # NEAR: sphere steps from t_seg until a step is long again.
             nearing = alive & (mode == NEAR)
             n = dr.while_loop((Float(t_seg), Float(t_seg), Float(0.0), Float(0.0), Float(omega0), found, t_hit,
-                               nearing, Bool(False), near_end), lambda *s: s[7], near, label="hf_near")
+                               nearing, Bool(False), near_end, UInt(0)), lambda *s: s[7], near,
+                           label="hf_near")
             found, t_hit = n[5], n[6]
             t_seg = dr.select(nearing, n[0], t_seg)
             mode = dr.select(nearing & n[8], PROBE, mode)
-            alive &= ~found & ~(nearing & ~n[8])
+            alive = alive & (~found & ~(nearing & ~n[8]))
             return t, t_hi, t_seg, mode, found, t_hit, alive & (it + 1 < 4096), it + 1
 
         # Rays that miss the zone are one cast; the others start by probing.
@@ -418,16 +422,16 @@ class HeightfieldCaster:
             out = (ci_s < 0) | (ci_s >= unx) | (cj_s < 0) | (cj_s >= uny)
             # The stretch is done: its end lies in this cell, or the ray left the grid.
             ends = step & (empty | (t_wall >= t_hi) | out)
-            step &= ~ends
+            step = step & ~ends
 
             t = dr.select(down, t_d, dr.select(step, dr.maximum(t, t_exit), t))
             lvl = dr.select(down, lvl - 1, dr.select(step, lvl_s, lvl))
             ci = dr.select(down, ci_d, dr.select(step, ci_s, ci))
             cj = dr.select(down, cj_d, dr.select(step, cj_s, cj))
-            found |= hit_now
+            found = found | hit_now
             t_hit = dr.select(hit_now, t_now, t_hit)
             # Termination follows from the integer steps; a budget guards it anyway.
-            alive &= ~hit_now & ~ends & (it + 1 < max_iter)
+            alive = alive & (~hit_now & ~ends & (it + 1 < max_iter))
             return t, t_hi, lvl, ci, cj, found, t_hit, alive, ended | ends, it + 1
 
         return step_fn
