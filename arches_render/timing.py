@@ -35,6 +35,25 @@ def timed_eval(fn, points, repeat):
     return statistics.median(times)
 
 
+def median_renders(scenes, spp, repeat, warm_spp=4):
+    """Median seconds of ``render_image(scene, spp, seed=i)`` for each scene.
+
+    Each scene renders once first (compiling its kernels); the timed renders then
+    take turns, scene after scene, so that a load that changes during the run
+    affects all of them alike.
+    """
+    from arches_render.render.renderer import render_image
+    for scene in scenes:
+        render_image(scene, warm_spp, seed=99)
+    times = [[] for _ in scenes]
+    for i in range(repeat):
+        for scene, ts in zip(scenes, times):
+            t = time.perf_counter()
+            render_image(scene, spp, seed=i)
+            ts.append(time.perf_counter() - t)
+    return [statistics.median(ts) for ts in times]
+
+
 def random_points(n, lo, hi, seed=0):
     """``n`` uniform random points in the box [lo, hi] as an ``mi.Point3f``."""
     pts = np.random.default_rng(seed).uniform(lo, hi, (n, 3)).astype(np.float32)

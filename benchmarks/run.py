@@ -3,7 +3,7 @@
     python benchmarks/run.py [--json] [--repeat N] [NAME ...]
 
 This file holds the foundation's benchmarks, ``bench_production.py`` the
-production ones (turntables, Dask). Each generator keeps its own in its package
+production ones (turntables, Dask), ``bench_heightfield.py`` the heightfield cast. Each generator keeps its own in its package
 (``generators/NAME/benchmarks.py``), declared as ``BENCHMARKS = {name: (fn, repeat)}``
 with ``fn(repeat) -> dict(value, unit, baseline, baseline_is, ...)`` in the
 registry (:mod:`arches_render.extensions`) and documented in its docstring; they
@@ -41,10 +41,11 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-import bench_production  # benchmarks/ is on sys.path as the script's folder
+import bench_heightfield  # benchmarks/ is on sys.path as the script's folder
+import bench_production
 from arches_render.render.renderer import build_scene, render_image
 from arches_render.scene import load_scene
-from arches_render.timing import REPO, random_points, timed_eval
+from arches_render.timing import REPO, median_renders, random_points, timed_eval
 
 
 def tree20():
@@ -99,19 +100,12 @@ def bench_field_evals_set10k(repeat):
 def bench_render_field_vs_mesh(repeat):
     desc = load_scene(REPO / "scenes" / "default.toml")
     w, h, spp = 320, 180, 16
-    out = {}
+    out, scenes = {}, []
     for geometry in ("field", "mesh"):
         t0 = time.perf_counter()
-        scene = build_scene(desc, geometry, w, h)
-        setup = time.perf_counter() - t0
-        render_image(scene, 4, seed=99)  # compile
-        times = []
-        for i in range(repeat):
-            t = time.perf_counter()
-            render_image(scene, spp, seed=i)
-            times.append(time.perf_counter() - t)
-        out[geometry] = statistics.median(times)
-        out[geometry + "_setup"] = setup
+        scenes.append(build_scene(desc, geometry, w, h))
+        out[geometry + "_setup"] = time.perf_counter() - t0
+    out["field"], out["mesh"] = median_renders(scenes, spp, repeat)
     return dict(value=out["field"] / out["mesh"], unit="x", baseline=2.0, baseline_is="goal",
                 field_s=out["field"], mesh_s=out["mesh"], mesh_setup_s=out["mesh_setup"],
                 resolution=f"{w}x{h}", spp=spp)
@@ -143,7 +137,7 @@ BENCHMARKS = {
 
 def all_benchmarks() -> dict:
     """The benchmarks above, the production ones and every generator's (the registry)."""
-    core = {**BENCHMARKS, **bench_production.BENCHMARKS}
+    core = {**BENCHMARKS, **bench_production.BENCHMARKS, **bench_heightfield.BENCHMARKS}
     return {**core, **extensions.benchmarks(core=core)}
 
 

@@ -117,8 +117,10 @@ class Heightfield(Node):
         self._bc = [opaque_float(v) for v in c]
         self._bh = [opaque_float(v) for v in h]
 
-    def height(self, x, y):
-        """Bilinear elevation at ``(x, y)`` (``mi.Float`` each), clamped at the edges."""
+    def patch(self, x, y):
+        """The bilinear cell under ``(x, y)`` (``mi.Float`` each, clamped at the edges):
+        its corner samples ``h00, h10, h01, h11`` and the local coordinates ``fu, fv``
+        in ``[0, 1]``."""
         u = dr.clip((x - self._x0) * self._inv_dx, 0.0, self.nx - 1.0)
         v = dr.clip((y - self._y0) * self._inv_dy, 0.0, self.ny - 1.0)
         i = dr.minimum(mi.UInt32(u), self.nx - 2)
@@ -129,6 +131,11 @@ class Heightfield(Node):
         h10 = dr.gather(mi.Float, self._data, k + 1)
         h01 = dr.gather(mi.Float, self._data, k + self.nx)
         h11 = dr.gather(mi.Float, self._data, k + self.nx + 1)
+        return h00, h10, h01, h11, fu, fv
+
+    def height(self, x, y):
+        """Bilinear elevation at ``(x, y)`` (``mi.Float`` each), clamped at the edges."""
+        h00, h10, h01, h11, fu, fv = self.patch(x, y)
         return dr.lerp(dr.lerp(h00, h10, fu), dr.lerp(h01, h11, fu), fv)
 
     def eval(self, p):

@@ -53,7 +53,7 @@ import mitsuba as mi
 
 from ..backend import variant_class
 from .aovs import aov_channel_names, primary_aovs
-from .sphere_tracer import SphereTracer
+from .heightfield_caster import make_tracer
 
 __all__ = ["ImplicitPathIntegrator", "mis_weight", "register"]
 
@@ -73,7 +73,9 @@ class _ImplicitPathImpl:
     Properties: ``max_depth`` (default 6, -1 = unbounded), ``rr_depth`` (5),
     ``hide_emitters`` (false), ``eps`` (relative hit tolerance, 2e-4), ``omega``
     (over-relaxation, 1.6), ``max_steps`` (512), ``aovs`` (false: return the AOVs
-    of :mod:`arches_render.render.aovs`).
+    of :mod:`arches_render.render.aovs`), ``heightfield_cast`` (true: ray-cast
+    heightfield trees, :mod:`arches_render.render.heightfield_caster`; false:
+    sphere-trace every field, for comparisons).
     """
 
     def __init__(self, props):
@@ -86,13 +88,16 @@ class _ImplicitPathImpl:
         self.omega = float(props.get("omega", 1.6))
         self.max_steps = int(props.get("max_steps", 512))
         self.aovs = bool(props.get("aovs", False))
+        self.heightfield_cast = bool(props.get("heightfield_cast", True))
         self.tracer = None
         self.field_bsdf = None
         self.atmosphere = None
 
     def attach(self, field, bsdf):
-        """Give the integrator the field to sphere-trace and the BSDF that shades it."""
-        self.tracer = SphereTracer(field, eps=self.eps, omega=self.omega, max_steps=self.max_steps)
+        """Give the integrator the field to trace and the BSDF that shades it (heightfield
+        trees are ray-cast, others sphere-traced: :func:`make_tracer`)."""
+        self.tracer = make_tracer(field, eps=self.eps, omega=self.omega, max_steps=self.max_steps,
+                                  cast=self.heightfield_cast)
         self.field_bsdf = bsdf
 
     def attach_atmosphere(self, atmosphere):
@@ -125,8 +130,7 @@ class _ImplicitPathImpl:
         """Shadow-ray test against meshes and the field."""
         blocked = scene.ray_test(ray, active)
         if self.tracer is not None:
-            hit, _ = self.tracer.trace(ray.o, ray.d, ray.maxt, active & ~blocked)
-            blocked |= hit
+            blocked |= self.tracer.occluded(ray.o, ray.d, ray.maxt, active & ~blocked)
         return blocked
 
     def bsdf_at(self, si, ray, field_hit):

@@ -122,6 +122,10 @@ class SphereTracer:
         t, _, _, _, _, hit, _, _, _, _, _ = dr.while_loop(state, cond, body, label="sphere_trace")
         return hit & active, t
 
+    def occluded(self, o, d, tmax, active):
+        """Whether the segments ``o + t d``, ``0 <= t <= tmax``, meet the surface."""
+        return self.trace(o, d, tmax, active)[0]
+
     def surface(self, p, t, d=None):
         """Surface point and outward normal for hits ``p`` found at distance ``t``
         along direction ``d``.
