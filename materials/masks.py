@@ -29,15 +29,18 @@ Cavity (``cavity_radius``, role ``"cavity"``: a field, by default the scene's ro
     distance (metres) outside, and ``n`` the normal,
 
         crease  = sum_k w_k clamp((f(p + d_k n) + d_k) / d_k, 0, 1) / sum_k w_k,
-        ceiling = max_k smoothstep(-d_k/2, d_k/2, f(p + d_1 n + 4 d_k z)),
+        ceiling = 1 - 0.4 min(t_hit / 8R, 1)   if rock is found above, else 0,
         o = 1 - (1 - crease)(1 - ceiling),
 
-    ``d_k = R k / K`` (``K = cavity_samples``, ``w_k = 1/k``). A point in a crease
+    ``d_k = R k / K`` (``K = cavity_samples``, ``w_k = 1/k``); ``t_hit`` is where a
+    short sphere-tracing march of ``2K`` steps (``max(-f, d_1/2)`` each) straight up
+    from ``p + d_1 n`` meets rock (``f > -d_1/10``) within ``8R`` (rock far overhead
+    occludes less than rock just above). A point in a crease
     or a narrow cave sees its normal run into rock (``crease``); a cave floor, a
     cave wall and an overhang's underside have rock straight above them
     (``ceiling``; ``z`` the up axis). The albedo is multiplied by ``1 -
     cavity_strength * o`` and the wetness raised by ``cavity_damp * o``: cave
-    interiors and overhang undersides come out darker and damper. ``2K`` field
+    interiors and overhang undersides come out darker and damper. ``3K`` field
     evaluations per shading call, in one recorded loop so that the tree's code is
     emitted once.
 
@@ -64,8 +67,12 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 import numpy as np
+from skimage.filters import threshold_multiotsu
 
-__all__ = ["PALETTES", "MASK_KINDS", "NODE_ROLES", "look_keys", "strata_index", "Look"]
+from ..field.node import evaluate
+
+__all__ = ["PALETTES", "MASK_KINDS", "NODE_ROLES", "look_keys", "strata_index", "strata_levels", "terrain_look",
+           "Look"]
 
 #: Named strata palettes, softest stratum first (linear RGB albedo).
 PALETTES = {
@@ -111,6 +118,83 @@ def strata_index(rho, levels) -> np.ndarray:
     """
     r = np.clip(np.asarray(rho, np.float64), 0.0, 1.0)
     return np.searchsorted(np.asarray(levels, np.float64), r, side="right")
+
+
+def strata_levels(node, box, count: int, samples: int = 20000, seed: int = 0) -> list[float]:
+    """Resistance levels that split a geology into ``count`` strata where its histogram has valleys.
+
+    Parameters
+    ----------
+    node : object
+        A resistance node (``eval``; clamped to ``[0, 1]``).
+    box : (lo, hi)
+        The volume the rock occupies (numpy 3-vectors): the terrain's extent from
+        its lowest to its highest point.
+    count : int
+        Number of strata (>= 2).
+    samples : int
+        Random points evaluated.
+    seed : int
+
+    Returns
+    -------
+    list of float
+        ``count - 1`` increasing levels in (0, 1): the multi-level Otsu thresholds of
+        the sampled resistances (Liao, Chen and Chung 2001), which fall in the gaps
+        between hard and soft rock, so that each colour band is one kind of rock
+        rather than a slice through one; evenly spaced quantiles where the
+        resistances have too few distinct values.
+    """
+    lo, hi = (np.asarray(v, np.float64) for v in box)
+    P = np.random.default_rng(seed).uniform(lo, hi, (int(samples), 3))
+    rho = np.clip(evaluate(node, P).astype(np.float64), 0.0, 1.0)
+    try:
+        levels = [float(v) for v in threshold_multiotsu(rho, classes=count)]
+    except ValueError:  # fewer distinct values than classes
+        levels = []
+    if len(levels) != count - 1 or any(b <= a for a, b in zip(levels, levels[1:])):
+        levels = [float(v) for v in np.quantile(rho, np.arange(1, count) / count)]
+    out = [min(max(v, 1e-3), 1.0 - 1e-3) for v in levels]
+    for i in range(1, len(out)):
+        out[i] = max(out[i], out[i - 1] + 1e-4)  # strictly increasing, still below 1
+    return out
+
+
+def terrain_look(node, box, palette: str = "sandstone", geology: str = "geology", sea_level=None,
+                 cavity_radius: float = 2.0) -> dict:
+    """The lookdev keys of an amplified terrain's material: strata from its geology, cavity, wetness.
+
+    What ``arches-render amplify`` writes into ``[materials.landscape]`` (see
+    :mod:`arches_render.scene.material_keys` for the keys), so that every
+    amplified terrain colours its rock from its own geology by default.
+
+    Parameters
+    ----------
+    node : object
+        The built resistance node (to place the levels).
+    box : (lo, hi)
+        The rock's volume (:func:`strata_levels`).
+    palette : str
+        A name of :data:`PALETTES`.
+    geology : str
+        Name of the resistance node's ``[nodes]`` table in the scene.
+    sea_level : float, optional
+        Water line of the wet band.
+    cavity_radius : float
+        Reach of the occlusion (metres), about two DEM cells.
+
+    Returns
+    -------
+    dict
+        ``{"strata": {...}, "cavity": {...}[, "wetness": {...}]}``.
+    """
+    colours = PALETTES[palette]
+    look = {"strata": {"node": geology, "palette": palette,
+                       "levels": strata_levels(node, box, len(colours))},
+            "cavity": {"radius": float(cavity_radius)}}
+    if sea_level is not None:
+        look["wetness"] = {"level": float(sea_level), "height": float(cavity_radius)}
+    return look
 
 
 def _op(v, kind=None):
@@ -192,24 +276,33 @@ class Look:
             return mi.Float(0.0)
         R = self.f["cavity_radius"]
         K = self.samples
+        step = R * (1.0 / K)
+        reach = 8.0 * R
         up = mi.Vector3f(0.0, 0.0, 1.0)
+        start = p + n * step
 
-        def body(i, crease, wsum, ceiling):
-            k = mi.Float(i // 2 + 1)
-            d = R * k * (1.0 / K)
-            along = (i & 1) == 0
-            q = dr.select(along, p + n * d, p + n * (R * (1.0 / K)) + up * (4.0 * d))
+        def body(i, crease, wsum, t, hit):
+            # Iterations 0..K-1: crease samples along the normal; K..3K-1: the march upwards.
+            along = i < K
+            k = mi.Float(i + 1)
+            d = step * k
+            q = dr.select(along, p + n * d, start + up * t)
             f = mi.Float(node.eval(mi.Point3f(q)))
             w = dr.rcp(k)
             crease = dr.select(along, crease + w * dr.clip((f + d) * dr.rcp(d), 0.0, 1.0), crease)
             wsum = dr.select(along, wsum + w, wsum)
-            ceiling = dr.select(along, ceiling, dr.maximum(ceiling, _smoothstep(f * dr.rcp(d) + 0.5)))
-            return i + 1, crease, wsum, ceiling
+            marching = ~along & ~hit & (t < reach)
+            hit |= marching & (f > -0.1 * step)
+            t = dr.select(marching & ~hit, t + dr.maximum(-f, 0.5 * step), t)
+            return i + 1, crease, wsum, t, hit
 
         zero = dr.zeros(mi.Float, dr.width(p.x))
-        _, crease, wsum, ceiling = dr.while_loop(
-            (mi.UInt32(0), zero, zero, zero), lambda i, *_: i < 2 * K, body, label="triplanar_cavity")
+        _, crease, wsum, t, hit = dr.while_loop(
+            (mi.UInt32(0), zero, zero, zero, dr.zeros(mi.Bool, dr.width(p.x))), lambda i, *_: i < 3 * K, body,
+            label="triplanar_cavity")
         crease = crease * dr.rcp(dr.maximum(wsum, 1e-6))
+        # Rock far overhead occludes less than rock just above (0.6 at the reach).
+        ceiling = dr.select(hit, 1.0 - 0.4 * dr.clip(t * dr.rcp(reach), 0.0, 1.0), 0.0)
         return dr.select(mi.Bool(active), 1.0 - (1.0 - crease) * (1.0 - ceiling), 0.0)
 
     def wet(self, p, occ):
