@@ -48,7 +48,8 @@ from .imaging.exr import read_exr
 from .imaging.preview import write_png
 from .render.jobs import set_camera
 from .render.output import render_header, write_render
-from .render.renderer import attach_atmosphere, build_scene, load_materials, render_layers
+from .materials.triplanar import STRUCTURAL
+from .render.renderer import attach_atmosphere, attach_material_nodes, build_scene, load_materials, render_layers
 from .scene import parse_scene, read_toml
 
 __all__ = ["Lookdev", "load", "compare"]
@@ -250,14 +251,16 @@ class Lookdev:
         """Copy a material's new values into its live BSDF; False if its code must change."""
         a, b = old.materials[name], new.materials[name]
         masks_a, masks_b = old.material_masks.get(name, []), new.material_masks.get(name, [])
-        if a == b and not masks_b:
+        nodes_a, nodes_b = old.material_nodes.get(name, {}), new.material_nodes.get(name, {})
+        if a == b and not masks_b and not nodes_b:
             return True
-        # Strings and flags (type, textures, sRGB decoding, names) and the layer
-        # count shape the code; numbers are opaque values.
-        structural = {k: v for k, v in b.items() if k == "layer_count"
+        # Strings and flags (type, textures, sRGB decoding, names), the layer
+        # count and the other integer counts shape the code; numbers are opaque values.
+        structural = {k: v for k, v in b.items() if k in STRUCTURAL
                       or not isinstance(v, (int, float, list, dict)) or isinstance(v, bool)}
         if ({k: v for k, v in a.items() if k in structural} != structural
-                or [m[0] for m in masks_a] != [m[0] for m in masks_b]):
+                or [(m[0], m[4]) for m in masks_a] != [(m[0], m[4]) for m in masks_b]
+                or set(nodes_a) != set(nodes_b)):
             return False
         bsdf = self.bsdfs[name]
         live = mi.traverse(bsdf)
@@ -267,8 +270,7 @@ class Lookdev:
         for k in fresh.keys():
             live[k] = fresh[k]
         live.update()
-        for layer, node, lo, hi in masks_b:
-            bsdf.set_layer_mask(layer, node, lo, hi)
+        attach_material_nodes(bsdf, new, name)
         return True
 
     # ------------------------------------------------------------------ rendering

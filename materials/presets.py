@@ -1,9 +1,13 @@
 """Named triplanar material presets, stored as TOML data in ``materials/presets/``.
 
-A preset file holds ``description``, ``sharpness``, ``space`` and a list of
-``[[layer]]`` tables (bottom layer first) whose keys are the fields of
+A preset file holds ``description``, ``sharpness``, ``space``, an optional
+``[detail]`` table (the procedural detail layer: ``octaves``, ``wavelength``,
+``gain``, ``albedo``, ``roughness``, ``bump``, ``seed``; see
+:mod:`~arches_render.materials.detail`) and a list of ``[[layer]]`` tables (bottom
+layer first) whose keys are the fields of
 :class:`~arches_render.materials.triplanar.Layer`. Overrides address a layer
-by its ``name``: ``{'snow.height_min': 40.0}`` or ``{'snow': {'height_min': 40.0}}``.
+by its ``name``: ``{'snow.height_min': 40.0}`` or ``{'snow': {'height_min': 40.0}}``;
+a scene's ``detail`` key overrides the detail (:mod:`arches_render.scene.material_keys`).
 """
 
 from __future__ import annotations
@@ -12,6 +16,7 @@ import dataclasses
 from pathlib import Path
 
 from .. import tomlfile
+from .detail import DETAIL_KEYS
 from .triplanar import Layer, triplanar_dict
 
 __all__ = ["PRESET_DIR", "list_presets", "preset_layers", "preset_dict"]
@@ -38,10 +43,14 @@ def _read(name: str) -> dict:
         raise ValueError(f"unknown material preset '{name}'; allowed: {', '.join(names)}")
     path = PRESET_DIR / f"{name}.toml"
     data = tomlfile.load(path)
-    extra = sorted(set(data) - {"description", "layer", *_OPTIONS})
+    extra = sorted(set(data) - {"description", "layer", "detail", *_OPTIONS})
     if extra:
-        raise ValueError(f"{path}: unknown key '{extra[0]}'; allowed: description, layer, "
+        raise ValueError(f"{path}: unknown key '{extra[0]}'; allowed: description, layer, detail, "
                          f"{', '.join(_OPTIONS)}")
+    bad = sorted(set(data.get("detail", {})) - {k[len("detail_"):] for k in DETAIL_KEYS})
+    if bad:
+        raise ValueError(f"{path}: [detail] has unknown key '{bad[0]}'; allowed: "
+                         f"{', '.join(k[len('detail_'):] for k in DETAIL_KEYS)}")
     if not data.get("layer"):
         raise ValueError(f"{path}: needs at least one [[layer]] table")
     for i, table in enumerate(data["layer"]):
@@ -79,7 +88,8 @@ def preset_layers(name: str, overrides: dict | None = None) -> tuple[list[Layer]
     layers : list of Layer
         Bottom layer first.
     options : dict
-        ``{'sharpness': float, 'space': str}`` (keyword arguments of
+        ``{'sharpness': float, 'space': str}`` and the preset's ``detail_*``
+        properties (keyword arguments of
         :func:`~arches_render.materials.triplanar.triplanar_dict`).
 
     Raises
@@ -112,6 +122,8 @@ def preset_layers(name: str, overrides: dict | None = None) -> tuple[list[Layer]
         raise ValueError(f"preset '{name}': {e}") from None
     if options["space"] not in ("world", "object"):
         raise ValueError(f"preset '{name}': space '{options['space']}' is not one of world, object")
+    for key, value in data.get("detail", {}).items():
+        options[f"detail_{key}"] = value
     return layers, options
 
 

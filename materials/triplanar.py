@@ -21,6 +21,22 @@ Parameters that change between renders live in opaque Dr.Jit arrays
 (editable through :func:`mitsuba.traverse`), so editing them re-uses the
 compiled kernels.
 
+Besides the layer stack (each module's docstring holds its math):
+
+* textures tile without visible repetition (``layer{i}_tiling``, default
+  ``"histogram"``: Heitz and Neyret 2018, :mod:`~arches_render.materials.textures`);
+* a procedural detail layer (``detail_*``): multi-scale noise on albedo and
+  roughness and a bump from the same noise, cut off by the pixel footprint
+  ``si.t * pixel_spread`` (:mod:`~arches_render.materials.detail`);
+* terms read from the terrain (:mod:`~arches_render.materials.masks`): a palette
+  of stratum colours indexed by the geology's layer function (``strata_*`` and a
+  resistance node), cavity/occlusion from the field (``cavity``), wetness near a
+  water level (``wetness``); cavity and wetness also serve as layer masks.
+
+The BRDF of layer ``i`` is evaluated about the bumped normal ``n'`` (cosines
+``n' . w``), zero below the geometric shading hemisphere; sampling is cosine
+about ``n'``, so ``sample`` and ``eval / pdf`` agree.
+
 References
 ----------
 Peytavie A., Galin E., Grosjean J., Merillou S. (2009). Arches: a framework
@@ -35,20 +51,23 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass, fields
-from pathlib import Path
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
 from ..backend import variant_class
+from . import masks as M
+from .detail import DETAIL_KEYS, Detail, footprint
+from .textures import TEXTURE_DIR, TILINGS, load_texture, texture_path
 
-__all__ = ["MAX_LAYERS", "TEXTURE_DIR", "Layer", "triplanar_dict", "triplanar_weights",
+__all__ = ["MAX_LAYERS", "TEXTURE_DIR", "STRUCTURAL", "Layer", "triplanar_dict", "triplanar_weights",
            "composite_weights", "texture_path", "register", "TriplanarBSDF"]
 
 MAX_LAYERS = 8
-TEXTURE_DIR = Path(__file__).resolve().parent / "textures"
 OBJP_ATTRIBUTE = "vertex_objp"
+#: Integer properties that shape the kernels (an edit needs a new plugin, not a parameter edit).
+STRUCTURAL = ("layer_count", "detail_octaves", "strata_count", "strata_layer", "cavity_samples")
 
 # Stand-in for an unbounded rule: finite so that ``bound - x`` never meets
 # ``inf - inf`` in the coverage ramps, yet far beyond any terrain.
@@ -66,8 +85,8 @@ _LAYER_FLOATS = {
     "coverage": 1.0,
 }
 _LAYER_OTHER = {"texture": "", "tint": (1.0, 1.0, 1.0), "srgb": True, "normalize": True,
-                "name": ""}
-_GLOBAL_PROPS = {"layer_count", "sharpness", "space"}
+                "name": "", "tiling": "histogram"}
+_GLOBAL_PROPS = {"layer_count", "sharpness", "space", "pixel_spread", *DETAIL_KEYS}
 _LAYER_KEY = re.compile(r"layer(\d+)_")
 _SPACES = ("world", "object")
 
@@ -103,6 +122,9 @@ class Layer:
         Divide the texture by its mean luminance, so ``tint`` sets the mean.
     name : str
         Label for presets, overrides and AOVs.
+    tiling : str
+        ``'histogram'`` (random tiles, histogram-preserving blend), ``'bands'``
+        (tiles offset along u only, for banded textures) or ``'repeat'``.
     """
 
     texture: str = ""
@@ -119,6 +141,7 @@ class Layer:
     srgb: bool = True
     normalize: bool = True
     name: str = ""
+    tiling: str = "histogram"
 
     def __post_init__(self):
         self.tint = tuple(float(c) for c in self.tint)
@@ -128,6 +151,8 @@ class Layer:
             setattr(self, key, float(getattr(self, key)))
         _check_layer_values(self.name or "?", self.roughness, self.scale, self.coverage,
                             self.height_soft, self.slope_soft)
+        if self.tiling not in TILINGS:
+            raise ValueError(f"Layer '{self.name}': tiling '{self.tiling}' is not one of {', '.join(TILINGS)}")
 
 
 def _check_layer_values(label, roughness, scale, coverage, height_soft, slope_soft):
@@ -141,7 +166,7 @@ def _check_layer_values(label, roughness, scale, coverage, height_soft, slope_so
         raise ValueError(f"layer {label}: height_soft/slope_soft must be >= 0")
 
 
-def triplanar_dict(layers, sharpness: float = 8.0, space: str = "world") -> dict:
+def triplanar_dict(layers, sharpness: float = 8.0, space: str = "world", **extra) -> dict:
     """Flattened plugin dictionary of a triplanar material for :func:`mitsuba.load_dict`.
 
     Parameters
@@ -152,6 +177,9 @@ def triplanar_dict(layers, sharpness: float = 8.0, space: str = "world") -> dict
         Exponent of the projection blend (8 in the Arches paper).
     space : str
         ``'world'`` or ``'object'`` (positions from the ``vertex_objp`` mesh attribute).
+    **extra
+        Further plugin properties: ``detail_*``, ``strata_*``, ``cavity*``,
+        ``wet*``, ``pixel_spread`` (see the module docstring).
 
     Returns
     -------
@@ -169,7 +197,7 @@ def triplanar_dict(layers, sharpness: float = 8.0, space: str = "world") -> dict
     if space not in _SPACES:
         raise ValueError(f"triplanar: unknown space '{space}', allowed: {', '.join(_SPACES)}")
     d = {"type": "triplanar", "layer_count": len(layers), "sharpness": float(sharpness),
-         "space": space}
+         "space": space, **extra}
     for i, layer in enumerate(layers):
         for f in fields(Layer):
             value = getattr(layer, f.name)
@@ -226,65 +254,6 @@ def composite_weights(coverages):
     return weights
 
 
-def texture_path(name: str) -> Path:
-    """Resolve a layer texture name.
-
-    Parameters
-    ----------
-    name : str
-        File name inside :data:`TEXTURE_DIR` or an absolute path.
-
-    Returns
-    -------
-    pathlib.Path
-
-    Raises
-    ------
-    ValueError
-        When the file does not exist (the message lists the bundled textures).
-    """
-    path = Path(name)
-    if not path.is_absolute():
-        path = TEXTURE_DIR / name
-    if not path.is_file():
-        bundled = sorted(p.name for p in TEXTURE_DIR.glob("*.png"))
-        raise ValueError(f"triplanar: texture '{name}' not found; bundled textures: "
-                         f"{', '.join(bundled)} (or give an absolute path)")
-    return path
-
-
-_TEXTURES: dict = {}
-
-
-def _load_texture(name: str, srgb: bool, normalize: bool):
-    """The texture of a layer, loaded once per (variant, file, decoding)."""
-    path = texture_path(name)
-    key = (mi.variant(), str(path), bool(srgb), bool(normalize))
-    if key in _TEXTURES:
-        return _TEXTURES[key]
-    bmp = mi.Bitmap(str(path))
-    grey = bmp.pixel_format() in (mi.Bitmap.PixelFormat.Y, mi.Bitmap.PixelFormat.YA)
-    if not srgb:
-        # Data textures: take the stored numbers as they are.
-        bmp.set_srgb_gamma(False)
-    bmp = bmp.convert(mi.Bitmap.PixelFormat.Y if grey else mi.Bitmap.PixelFormat.RGB,
-                      mi.Struct.Type.Float32, srgb_gamma=False)
-    arr = np.array(bmp, dtype=np.float32).reshape(bmp.height(), bmp.width(), -1)
-    # Image rows run downwards; flip so that +v (world +Z on the side
-    # projections) shows the image upright on cliffs.
-    arr = np.ascontiguousarray(arr[::-1])
-    if normalize:
-        lum = arr[..., 0] if grey else arr @ np.array([0.2126, 0.7152, 0.0722], np.float32)
-        arr = arr / max(float(lum.mean()), 1e-6)
-    if arr.shape[2] == 3 and mi.variant().startswith("cuda"):
-        # Hardware textures take 1, 2 or 4 channels.
-        arr = np.concatenate([arr, np.ones_like(arr[..., :1])], axis=2)
-    tex = mi.Texture2f(mi.TensorXf(arr), use_accel=True, filter_mode=dr.FilterMode.Linear,
-                       wrap_mode=dr.WrapMode.Repeat)
-    _TEXTURES[key] = tex
-    return tex
-
-
 def _smoothstep01(t):
     t = dr.clip(t, 0.0, 1.0)
     return t * t * (3.0 - 2.0 * t)
@@ -336,18 +305,19 @@ class _TriplanarImpl:
         count = int(props.get("layer_count", 1 + max(indices, default=0)))
         if not 1 <= count <= MAX_LAYERS:
             raise ValueError(f"triplanar: layer_count {count} is outside 1..{MAX_LAYERS}")
-        allowed = set(_GLOBAL_PROPS) | {f"layer{i}_{k}" for i in range(count)
-                                        for k in (*_LAYER_FLOATS, *_LAYER_OTHER)}
+        allowed = set(_GLOBAL_PROPS) | M.look_keys(names) | {
+            f"layer{i}_{k}" for i in range(count) for k in (*_LAYER_FLOATS, *_LAYER_OTHER)}
         unknown = sorted(names - allowed)
         if unknown:
             raise ValueError(f"triplanar: unknown properties {unknown}; per layer i < {count}: "
                              f"layer{{i}}_{{{', '.join((*_LAYER_FLOATS, *_LAYER_OTHER))}}}, "
-                             f"global: {', '.join(sorted(_GLOBAL_PROPS))}")
+                             f"global: {', '.join(sorted(_GLOBAL_PROPS))}, strata*, cavity*, wet*")
         self.space = str(props.get("space", "world"))
         if self.space not in _SPACES:
             raise ValueError(f"triplanar: unknown space '{self.space}', allowed: "
                              f"{', '.join(_SPACES)}")
         self.sharpness = _opaque(float(props.get("sharpness", 8.0)), mi.Float)
+        self.pixel_spread = _opaque(float(props.get("pixel_spread", 0.0)), mi.Float)
         self.layer_count = count
         self.names, self.textures, self.tint, self.masks = [], [], [], [None] * count
         self.params = {k: [] for k in _LAYER_FLOATS}
@@ -361,25 +331,33 @@ class _TriplanarImpl:
             self.tint.append(_opaque(_colour(get("tint", (1.0, 1.0, 1.0)), f"layer{i}_tint"),
                                      mi.Color3f))
             name, srgb, norm = str(get("texture", "")), get("srgb", True), get("normalize", True)
-            self.textures.append(_load_texture(name, bool(srgb), bool(norm)) if name else None)
+            tiling = str(get("tiling", "histogram"))
+            # Each layer draws its own tiles (seed i) even where layers share a texture.
+            self.textures.append(load_texture(name, bool(srgb), bool(norm), tiling, seed=i) if name else None)
             self.names.append(str(get("name", "")) or f"layer{i}")
+        self.detail = Detail.from_props(props)
+        self.look = M.Look(props, count)
         self.m_flags = mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
         self.m_components = [self.m_flags]
 
     # ----------------------------------------------------------------- public
-    def set_layer_mask(self, i: int, node, lo: float = 0.0, hi: float = 1.0) -> None:
-        """Multiply layer ``i``'s coverage by ``smoothstep(lo, hi, node.eval(p))``.
+    def set_layer_mask(self, i: int, node, lo: float = 0.0, hi: float = 1.0, kind: str = "node") -> None:
+        """Multiply layer ``i``'s coverage by ``smoothstep(lo, hi, m(p))``.
 
         Parameters
         ----------
         i : int
             Layer index, ``1 <= i < layer_count`` (layer 0 is always covered).
         node : object or None
-            Anything with ``eval(p: mi.Point3f) -> mi.Float`` (a field node,
-            a noise); ``None`` removes the mask. ``p`` is the shading position
-            (object space when ``space == 'object'``).
+            For ``kind = 'node'``: anything with ``eval(p: mi.Point3f) -> mi.Float``
+            (a field node, a noise, a resistance); ``m = node.eval(p)`` at the
+            shading position (object space when ``space == 'object'``). ``None``
+            with ``kind = 'node'`` removes the mask.
         lo, hi : float
-            Field values mapped to coverage 0 and 1 (``hi < lo`` inverts).
+            Values mapped to coverage 0 and 1 (``hi < lo`` inverts).
+        kind : str
+            ``'node'``, ``'cavity'`` (``m`` = the occlusion ``o``) or ``'wetness'``
+            (``m`` = the wetness ``w``), see :mod:`~arches_render.materials.masks`.
 
         Notes
         -----
@@ -389,8 +367,24 @@ class _TriplanarImpl:
         if not 1 <= i < self.layer_count:
             raise ValueError(f"triplanar: mask layer {i} is outside 1..{self.layer_count - 1} "
                              "(layer 0, the base, is always fully covered)")
-        self.masks[i] = None if node is None else (
-            node, _opaque(float(lo), mi.Float), _opaque(float(hi), mi.Float))
+        if kind not in M.MASK_KINDS:
+            raise ValueError(f"triplanar: mask kind '{kind}' is not one of {', '.join(M.MASK_KINDS)}")
+        remove = node is None and kind == "node"
+        self.masks[i] = None if remove else (
+            node, _opaque(float(lo), mi.Float), _opaque(float(hi), mi.Float), kind)
+
+    def set_node(self, role: str, node) -> None:
+        """Attach the node a look term reads.
+
+        Parameters
+        ----------
+        role : str
+            ``'strata'`` (a resistance node: its value ``rho`` indexes the palette)
+            or ``'cavity'`` (the field whose occlusion darkens cavities).
+        node : object or None
+            Anything with ``eval(p)``; ``None`` detaches.
+        """
+        self.look.set_node(role, node)
 
     def position(self, si, active=True):
         """Shading position: ``si.p``, or ``vertex_objp`` in object space where a mesh has it.
@@ -422,10 +416,12 @@ class _TriplanarImpl:
         -------
         list of mi.Float
         """
-        return self._weights(si, self.position(si, active), active)
+        active = mi.Bool(active)
+        occ, wet = self._terrain_terms(si, active)
+        return self._weights(si, self.position(si, active), occ, wet)
 
     def albedo(self, si, active=True):
-        """Blended diffuse albedo ``sum_i w_i a_i`` at ``si`` (linear RGB).
+        """Blended diffuse albedo ``sum_i w_i a_i`` at ``si`` (linear RGB), with detail and look terms.
 
         Parameters
         ----------
@@ -436,10 +432,17 @@ class _TriplanarImpl:
         -------
         mi.Color3f
         """
-        return self._lobes(si, active)[0]
+        return self._shade(si, active)[0]
 
     # ------------------------------------------------------------ internals
-    def _weights(self, si, p, active):
+    def _terrain_terms(self, si, active):
+        """Occlusion and wetness at ``si`` (zeros where the material has neither)."""
+        if not (self.look.cavity or self.look.wetness):
+            return mi.Float(0.0), mi.Float(0.0)
+        occ = self.look.occlusion(mi.Point3f(si.p), mi.Vector3f(si.sh_frame.n), active)
+        return occ, self.look.wet(si.p, occ)
+
+    def _weights(self, si, p, occ, wet):
         n = si.sh_frame.n
         slope = dr.acos(dr.clip(n.z, -1.0, 1.0)) * (180.0 / dr.pi)
         cov = [None]
@@ -449,38 +452,52 @@ class _TriplanarImpl:
                                          P["height_soft"][i]) \
                 * _band(slope, P["slope_min"][i], P["slope_max"][i], P["slope_soft"][i])
             if self.masks[i] is not None:
-                node, lo, hi = self.masks[i]
+                node, lo, hi, kind = self.masks[i]
                 span = hi - lo
-                t = (mi.Float(node.eval(mi.Point3f(p))) - lo) / dr.select(span == 0.0, 1e-20, span)
+                m = {"cavity": occ, "wetness": wet}.get(kind)
+                m = mi.Float(node.eval(mi.Point3f(p))) if m is None else m
+                t = (m - lo) / dr.select(span == 0.0, 1e-20, span)
                 c = c * _smoothstep01(t)
             cov.append(dr.clip(c, 0.0, 1.0))
         return composite_weights(cov)
 
-    def _texel(self, i, p, b, active):
+    def _texel(self, i, p, b, fp, active):
         """Triplanar texture value of layer ``i`` (a Color3f, 1 where untextured)."""
         tex = self.textures[i]
         if tex is None:
             return mi.Color3f(1.0)
         inv = dr.rcp(self.params["scale"][i])
+        texels = fp * inv * tex.texels  # the footprint in texels
         out = mi.Color3f(0.0)
         for k, uv in enumerate(((p.y, p.z), (p.x, p.z), (p.x, p.y))):
             on = active & (b[k] > _MIN_PROJECTION)
-            v = tex.eval(mi.Point2f(uv[0] * inv, uv[1] * inv), on)
-            c = mi.Color3f(v[0], v[1], v[2]) if len(v) >= 3 else mi.Color3f(v[0])
+            c = tex.eval(mi.Point2f(uv[0] * inv, uv[1] * inv), texels, on)
             out += dr.select(on, b[k], 0.0) * c
         return out
 
-    def _lobes(self, si, active):
-        """Albedo and the two Oren–Nayar colour terms ``sum w a A``, ``sum w a B``."""
+    def _shade(self, si, active):
+        """Albedo, the two Oren-Nayar colour terms ``sum w a A``, ``sum w a B``, and the bumped local normal."""
         active = mi.Bool(active)
         p = self.position(si, active)
-        w = self._weights(si, p, active)
-        b = triplanar_weights(si.sh_frame.n, self.sharpness)
+        occ, wet = self._terrain_terms(si, active)
+        w = self._weights(si, p, occ, wet)
+        n = mi.Vector3f(si.sh_frame.n)
+        b = triplanar_weights(n, self.sharpness)
+        fp = footprint(si, self.pixel_spread)
+        a_fac, r_fac, n_local = mi.Float(1.0), mi.Float(1.0), mi.Vector3f(0.0, 0.0, 1.0)
+        if self.detail is not None:
+            a_fac, r_fac, n_bumped = self.detail.eval(p, n, fp, active)
+            n_local = dr.normalize(si.sh_frame.to_local(n_bumped))
+        if self.look.wetness or self.look.cavity:
+            r_fac = r_fac * self.look.roughness_factor(wet)
+        strata = self.look.strata_color(si.p) if self.look.strata else None
         albedo, ca, cb = mi.Color3f(0.0), mi.Color3f(0.0), mi.Color3f(0.0)
         for i in range(self.layer_count):
             on = active & (w[i] > 0.0)
-            a = dr.clip(self.tint[i] * self._texel(i, p, b, on), 0.0, 1.0) * w[i]
-            s2 = dr.square(dr.clip(self.params["roughness"][i], 0.0, 1.0))
+            tint = strata if (strata is not None and i == self.look.strata_layer) else self.tint[i]
+            a = tint * self._texel(i, p, b, fp, on) * a_fac
+            a = self.look.albedo_factor(dr.clip(a, 0.0, 1.0), occ, wet) * w[i]
+            s2 = dr.square(dr.clip(self.params["roughness"][i] * r_fac, 0.0, 1.0))
             one_minus_a = 0.5 * s2 / (s2 + 0.33)
             # The directional albedo is A + B G(theta_i) with G < 1/2 (G -> 1/2
             # at grazing), so for sigma < 0.35 the qualitative model reflects
@@ -490,55 +507,58 @@ class _TriplanarImpl:
             albedo += a
             ca += a * (1.0 - one_minus_a)
             cb += a * b_term
-        return albedo, ca, cb
+        return albedo, ca, cb, n_local
 
-    def _brdf_cos(self, si, wo, active):
-        """``f * cos(theta_o) * pi`` (the cosine-sampling weight) and the validity mask."""
-        cos_i, cos_o = mi.Frame3f.cos_theta(si.wi), mi.Frame3f.cos_theta(wo)
-        valid = mi.Bool(active) & (cos_i > 0.0) & (cos_o > 0.0)
-        _, ca, cb = self._lobes(si, valid)
+    def _brdf_cos(self, si, wo, active, shading=None):
+        """``f * cos(theta_o') * pi / cos(theta_o')`` (the cosine-sampling weight about the bumped
+        normal), the validity mask and the bumped local normal."""
+        cos_gi, cos_go = mi.Frame3f.cos_theta(si.wi), mi.Frame3f.cos_theta(wo)
+        valid = mi.Bool(active) & (cos_gi > 0.0) & (cos_go > 0.0)
+        _, ca, cb, nl = self._shade(si, valid) if shading is None else shading
+        cos_i, cos_o = dr.dot(si.wi, nl), dr.dot(wo, nl)
+        valid &= (cos_i > 0.0) & (cos_o > 0.0)
         # sin(a) tan(b) max(0, cos(dphi)) written without trigonometry:
         # dot(wi, wo) - cos_i cos_o = sin_i sin_o cos(dphi).
         s = dr.dot(si.wi, wo) - cos_i * cos_o
         g = dr.maximum(s, 0.0) / dr.maximum(dr.maximum(cos_i, cos_o), 1e-8)
-        return dr.select(valid, ca + cb * g, 0.0), valid
+        return dr.select(valid, ca + cb * g, 0.0), valid, dr.maximum(cos_o, 0.0)
 
     # ---------------------------------------------------------- BSDF interface
     def sample(self, ctx, si, sample1, sample2, active=True):
-        """Cosine-hemisphere sample; the weight is ``eval / pdf``."""
+        """Cosine sample about the bumped normal; the weight is ``eval / pdf``."""
         bs = dr.zeros(mi.BSDFSample3f)
         if not ctx.is_enabled(mi.BSDFFlags.DiffuseReflection):
             return bs, mi.Color3f(0.0)
-        wo = mi.warp.square_to_cosine_hemisphere(sample2)
-        weight, valid = self._brdf_cos(si, wo, active)
+        active = mi.Bool(active)
+        shading = self._shade(si, active & (mi.Frame3f.cos_theta(si.wi) > 0.0))
+        wo = mi.Frame3f(shading[3]).to_world(mi.warp.square_to_cosine_hemisphere(sample2))
+        weight, valid, cos_o = self._brdf_cos(si, wo, active, shading)
         bs.wo = wo
-        bs.pdf = dr.select(valid, mi.warp.square_to_cosine_hemisphere_pdf(wo), 0.0)
+        bs.pdf = dr.select(valid, cos_o * dr.inv_pi, 0.0)
         bs.eta = 1.0
         bs.sampled_type = mi.UInt32(+mi.BSDFFlags.DiffuseReflection)
         bs.sampled_component = mi.UInt32(0)
         return bs, weight
 
     def eval(self, ctx, si, wo, active=True):
-        """BRDF times ``cos(theta_o)``; zero below the surface on either side."""
+        """BRDF times ``cos(theta_o')`` about the bumped normal; zero below the surface on either side."""
         if not ctx.is_enabled(mi.BSDFFlags.DiffuseReflection):
             return mi.Color3f(0.0)
-        value, _ = self._brdf_cos(si, wo, active)
-        return value * dr.inv_pi * dr.maximum(mi.Frame3f.cos_theta(wo), 0.0)
+        value, _, cos_o = self._brdf_cos(si, wo, active)
+        return value * dr.inv_pi * cos_o
 
     def pdf(self, ctx, si, wo, active=True):
-        """Cosine-hemisphere density of ``wo``."""
+        """Cosine density of ``wo`` about the bumped normal."""
         if not ctx.is_enabled(mi.BSDFFlags.DiffuseReflection):
             return mi.Float(0.0)
-        ok = mi.Bool(active) & (mi.Frame3f.cos_theta(si.wi) > 0.0) \
-            & (mi.Frame3f.cos_theta(wo) > 0.0)
-        return dr.select(ok, mi.warp.square_to_cosine_hemisphere_pdf(wo), 0.0)
+        _, valid, cos_o = self._brdf_cos(si, wo, active)
+        return dr.select(valid, cos_o * dr.inv_pi, 0.0)
 
     def eval_pdf(self, ctx, si, wo, active=True):
         """``(eval, pdf)`` sharing one shading evaluation."""
         if not ctx.is_enabled(mi.BSDFFlags.DiffuseReflection):
             return mi.Color3f(0.0), mi.Float(0.0)
-        value, valid = self._brdf_cos(si, wo, active)
-        cos_o = dr.maximum(mi.Frame3f.cos_theta(wo), 0.0)
+        value, valid, cos_o = self._brdf_cos(si, wo, active)
         return value * dr.inv_pi * cos_o, dr.select(valid, cos_o * dr.inv_pi, 0.0)
 
     def eval_diffuse_reflectance(self, si, active=True):
@@ -546,8 +566,10 @@ class _TriplanarImpl:
         return self.albedo(si, active)
 
     def traverse(self, callback):
-        """Expose the opaque parameters: ``sharpness``, ``layer{i}_tint``, ``layer{i}_<rule>``."""
+        """Expose the opaque parameters: ``sharpness``, ``pixel_spread``, ``layer{i}_tint``,
+        ``layer{i}_<rule>``, ``layer{i}_mask_lo/hi`` and those of the detail and look terms."""
         callback.put("sharpness", self.sharpness, mi.ParamFlags.NonDifferentiable)
+        callback.put("pixel_spread", self.pixel_spread, mi.ParamFlags.NonDifferentiable)
         differentiable = ("roughness", "coverage")
         for i in range(self.layer_count):
             callback.put(f"layer{i}_tint", self.tint[i], 0)
@@ -557,15 +579,20 @@ class _TriplanarImpl:
             if self.masks[i] is not None:
                 callback.put(f"layer{i}_mask_lo", self.masks[i][1], mi.ParamFlags.NonDifferentiable)
                 callback.put(f"layer{i}_mask_hi", self.masks[i][2], mi.ParamFlags.NonDifferentiable)
+        if self.detail is not None:
+            self.detail.traverse(callback)
+        self.look.traverse(callback)
 
     def parameters_changed(self, keys=None):
         """Make edited values opaque again: written literals would otherwise bake into kernels."""
-        dr.make_opaque(self.sharpness, self.tint, self.params,
-                       [m[1:] for m in self.masks if m is not None])
+        dr.make_opaque(self.sharpness, self.pixel_spread, self.tint, self.params,
+                       [m[1:3] for m in self.masks if m is not None], self.look.opaque(),
+                       self.detail.params if self.detail is not None else [])
 
     def to_string(self):
         return (f"TriplanarBSDF[space={self.space}, layers={self.names}, "
-                f"textured={[t is not None for t in self.textures]}]")
+                f"textured={[t is not None for t in self.textures]}, detail={self.detail is not None}, "
+                f"strata={self.look.strata}, cavity={self.look.cavity}, wetness={self.look.wetness}]")
 
 
 def _bsdf_class():

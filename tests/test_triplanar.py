@@ -323,8 +323,10 @@ def test_traverse_edit_changes_render_without_new_kernel():
 
 
 def test_textures_are_cached_and_decoded():
-    a = tp._load_texture("sand.png", True, True)
-    assert tp._load_texture("sand.png", True, True) is a
+    from arches_render.materials import textures
+    a = textures.load_texture("sand.png", True, True)
+    assert textures.load_texture("sand.png", True, True) is a
+    assert textures.load_texture("sand.png", True, True, "repeat") is not a
     with pytest.raises(ValueError, match="bundled textures"):
         tp.texture_path("no_such_texture.png")
 

@@ -24,7 +24,7 @@ import numpy as np
 
 from ..backend import set_variant
 from ..scene import load_scene
-from .renderer import build_scene, render_layers
+from .renderer import build_scene, render_layers, set_pixel_spread
 
 __all__ = ["RenderJob", "run_job", "clear_cache"]
 
@@ -119,6 +119,7 @@ def set_camera(scene, origin, target, up, fov) -> None:
                                        target=[float(v) for v in target], up=[float(v) for v in up]))
     params["sensor.x_fov"] = float(fov)
     params.update()
+    set_pixel_spread(scene, float(fov))
 
 
 def run_job(job: RenderJob, progress=None):

@@ -21,7 +21,9 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from ..materials.detail import pixel_spread
 from ..mesh.polygonize import polygonize
+from ..scene.material_keys import FIELD_ROOT
 from .aovs import split_channels
 from .atmosphere import Atmosphere
 from .plugins import ensure_registered
@@ -69,15 +71,57 @@ def load_materials(desc) -> dict:
     """Mitsuba BSDF objects of the scene's materials, with their layer masks attached.
 
     Objects rather than dictionaries: a mask is a field node, which cannot travel
-    through ``mi.load_dict``; meshes and the field then share the same BSDF.
+    through ``mi.load_dict``; meshes and the field then share the same BSDF. The
+    nodes the lookdev terms read (strata, cavity) are attached here too; a
+    cavity without a node of its own reads the scene's field.
     """
     ensure_registered()
     bsdfs = {}
     for name, mat in desc.materials.items():
         bsdfs[name] = mi.load_dict(mat)
-        for layer, node, lo, hi in desc.material_masks.get(name, ()):
-            bsdfs[name].set_layer_mask(layer, node, lo, hi)
+        attach_material_nodes(bsdfs[name], desc, name)
     return bsdfs
+
+
+def attach_material_nodes(bsdf, desc, name) -> None:
+    """Give the BSDF of material ``name`` its layer masks and look nodes from ``desc``."""
+    for layer, node, lo, hi, kind in desc.material_masks.get(name, ()):
+        bsdf.set_layer_mask(layer, node, lo, hi, kind)
+    for role, node in getattr(desc, "material_nodes", {}).get(name, {}).items():
+        bsdf.set_node(role, desc.field if node == FIELD_ROOT else node)
+
+
+def set_pixel_spread(scene, fov=None, width=None) -> None:
+    """Tell every triplanar BSDF of a built scene the camera's pixel size (its detail footprint).
+
+    Parameters
+    ----------
+    scene : mi.Scene
+    fov : float, optional
+        Horizontal field of view in degrees (default: the sensor's).
+    width : int, optional
+        Full image width in pixels (default: the film's).
+
+    Notes
+    -----
+    An opaque parameter edit: no kernel is recompiled. The BSDFs are those of the
+    shapes and the integrator's field BSDF.
+    """
+    sensor = scene.sensors()[0]
+    if fov is None:
+        fov = float(mi.traverse(sensor)["x_fov"][0])
+    width = int(sensor.film().size()[0]) if width is None else int(width)
+    spread = pixel_spread(fov, width)
+    bsdfs = [shape.bsdf() for shape in scene.shapes()]
+    bsdfs.append(getattr(scene.integrator(), "field_bsdf", None))
+    done = set()
+    for bsdf in bsdfs:
+        if bsdf is None or id(bsdf) in done or not hasattr(bsdf, "pixel_spread"):
+            continue
+        done.add(id(bsdf))
+        params = mi.traverse(bsdf)
+        params["pixel_spread"] = spread
+        params.update()
 
 
 def build_scene(desc, geometry=None, width=None, height=None, voxel=None, progress=None,
@@ -141,6 +185,7 @@ def build_scene(desc, geometry=None, width=None, height=None, voxel=None, progre
         scene = mi.load_dict(d)
         scene.integrator().attach(desc.field, field_bsdf)
     attach_atmosphere(scene, desc)
+    set_pixel_spread(scene, desc.camera.fov, width or s.width)
     return scene
 
 

@@ -10,9 +10,11 @@ A scene file is data, never code. Top-level tables:
                  near a pixel inflates every silhouette), ``omega``
 ``[camera]``     ``origin``, ``target``, ``up`` (default +Z), ``fov`` (degrees, horizontal)
 ``[[lights]]``   ``type`` = ``sunsky`` | ``directional`` | ``point`` | ``constant`` | ``envmap``
-``[materials.NAME]`` ``type = "triplanar"`` with ``preset``, ``overrides`` and
-                 ``masks = [{layer, node, lo, hi}]`` (a layer's coverage times
-                 ``smoothstep(lo, hi, node(p))`` for a field or noise node), or
+``[materials.NAME]`` ``type = "triplanar"`` with ``preset``, ``overrides``,
+                 ``masks = [{layer, [kind], node, lo, hi}]`` (a layer's coverage times
+                 ``smoothstep(lo, hi, m)``, ``m`` a field or noise node's value, the
+                 cavity or the wetness) and the lookdev keys ``detail``, ``strata``,
+                 ``cavity``, ``wetness`` (:mod:`arches_render.scene.material_keys`), or
                  ``type = "diffuse"`` with ``color``
 ``[[meshes]]``   ``file`` (PLY/OBJ) or ``shape`` (rectangle, disk, sphere, cube), a
                  transform (``translate``, ``rotate = {axis, angle}``, ``scale``), ``material``
@@ -51,6 +53,7 @@ from .. import extensions, tomlfile
 from ..field.node import finite_box
 from ..materials import presets
 from .errors import SceneError
+from .material_keys import parse_look, parse_masks
 from .nodes import NodeBuilder
 from .validate import Table
 
@@ -108,7 +111,8 @@ class SceneDescription:
     camera: Camera
     lights: list = dc_field(default_factory=list)       # Mitsuba emitter dicts
     materials: dict = dc_field(default_factory=dict)    # name -> Mitsuba BSDF dict
-    material_masks: dict = dc_field(default_factory=dict)  # name -> [(layer, node, lo, hi)]
+    material_masks: dict = dc_field(default_factory=dict)  # name -> [(layer, node, lo, hi, kind)]
+    material_nodes: dict = dc_field(default_factory=dict)  # name -> {role: node} (material_keys)
     meshes: list = dc_field(default_factory=list)       # Mitsuba shape dicts
     field: object = None                                # root Node or None
     field_material: str | None = None
@@ -187,9 +191,9 @@ def _atmosphere(t: Table, lights: list) -> AtmosphereSettings:
     return a
 
 
-def _material(t: Table, builder) -> tuple[dict, list]:
+def _material(t: Table, builder) -> tuple[dict, list, dict]:
     kind = t.string("type", "triplanar", choices={"triplanar", "diffuse"})
-    masks = []
+    masks, nodes = [], {}
     if kind == "diffuse":
         d = {"type": "diffuse", "reflectance": _rgb(t, "color", [0.5, 0.5, 0.5])}
     else:
@@ -203,16 +207,10 @@ def _material(t: Table, builder) -> tuple[dict, list]:
         except ValueError as exc:
             raise t.error("overrides" if over else "preset", str(exc)) from None
         names = [layer.name for layer in layers]
-        for m in t.tables("masks"):
-            layer = m.string("layer", choices=set(names[1:]))
-            node = builder.build(m.raw("node"), m, "node")
-            lo, hi = m.number("lo", 0.0), m.number("hi", 1.0)
-            if lo == hi:
-                raise m.error("hi", f"must differ from lo ({lo})")
-            m.finish()
-            masks.append((names.index(layer), node, lo, hi))
+        nodes = parse_look(t, builder, names, d)
+        masks = parse_masks(t, builder, names, d)
     t.finish()
-    return d, masks
+    return d, masks, nodes
 
 
 def _mesh(t: Table, base_dir: Path, materials: dict) -> dict:
@@ -345,11 +343,13 @@ def parse_scene(data: dict, path) -> SceneDescription:
 
     mats = root.table("materials", {})
     materials = {"default": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.5] * 3}}}
-    material_masks = {}
+    material_masks, material_nodes = {}, {}
     for mname in list(mats.data):
-        materials[mname], masks = _material(mats.table(mname), builder)
+        materials[mname], masks, mnodes = _material(mats.table(mname), builder)
         if masks:
             material_masks[mname] = masks
+        if mnodes:
+            material_nodes[mname] = mnodes
     mats.finish()
 
     meshes = [_mesh(t, base_dir, materials) for t in root.tables("meshes")]
@@ -379,6 +379,6 @@ def parse_scene(data: dict, path) -> SceneDescription:
     root.finish()
     return SceneDescription(file=path, name=name, description=description, render=settings,
                             camera=camera, lights=lights, materials=materials,
-                            material_masks=material_masks, meshes=meshes,
+                            material_masks=material_masks, material_nodes=material_nodes, meshes=meshes,
                             field=field_node, field_material=field_material, tables=tables,
                             atmosphere=atmosphere)

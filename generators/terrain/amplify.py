@@ -174,9 +174,8 @@ def amplify(heights, cell_size, preset, seed, work_dir, prefix="amplified", prog
     root = tree.add("world", {"type": "sum", "children": children} if len(children) > 1
                     else {"type": "union", "children": children})
     run.timer.step("construction tree")
-    if not any(n == "geology" for n in _referenced(tree.tables, "world")):
-        # Geology unused by the final tree (no primitive kept): the loader rejects unused nodes.
-        tree.builder.forget("geology")
+    # The geology stays in the tables even where the final tree does not read it: the
+    # scene's material colours the rock by its strata (lookdev, issue 15).
     focus_pts = run.focus
     focus = np.concatenate(focus_pts)[::max(1, sum(len(f) for f in focus_pts) // 5000)] if focus_pts else None
     stats = run.stats
@@ -188,27 +187,3 @@ def amplify(heights, cell_size, preset, seed, work_dir, prefix="amplified", prog
         reach = 50.0 * max(W, D)
         result.water_file = tree.file("water.ply", lambda p: water_mesh(H, extent, run.sea_level, reach).export(p))
     return result
-
-
-def _referenced(tables, name):
-    """Names of the node tables reachable from ``name`` (named references only)."""
-    seen, stack = set(), [name]
-    while stack:
-        n = stack.pop()
-        if n in seen or n not in tables:
-            continue
-        seen.add(n)
-
-        def refs(v):
-            if isinstance(v, str) and v in tables:
-                yield v
-            elif isinstance(v, list):
-                for x in v:
-                    yield from refs(x)
-            elif isinstance(v, dict):
-                for x in v.values():
-                    yield from refs(x)
-        for k, v in tables[n].items():
-            if k != "type":
-                stack.extend(refs(v))
-    return seen

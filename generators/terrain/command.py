@@ -23,9 +23,12 @@ import shutil
 import tempfile
 from pathlib import Path
 
+import numpy as np
+
 from arches_render.atomic import atomic_write
 from arches_render.commands import Progress, UsageError, bounded_int, positive_float
 from arches_render.field.heightmaps import DEMError, read_dem
+from arches_render.scene.nodes import NodeBuilder
 
 from .amplify import amplify
 from .presets import PRESETS
@@ -59,6 +62,15 @@ def register(subparsers):
     p.set_defaults(func=run)
 
 
+def _geology(result, base, zhi):
+    """The built geology node (the material's strata read it) and the rock's volume."""
+    if "geology" not in result.tables:
+        return None, None
+    node = NodeBuilder({"geology": result.tables["geology"]}, Path("geology.toml"), Path(".")).named("geology")
+    x0, y0, x1, y1 = result.extent
+    return node, (np.array([x0, y0, base]), np.array([x1, y1, zhi]))
+
+
 def _scene_doc(result, name):
     H, extent = result.heights, result.extent
     base = min(float(n.bounds()[0][2]) for n in result.root.walk() if n.kind == "implicit_heightfield")
@@ -74,7 +86,8 @@ def _scene_doc(result, name):
         "render": {"resolution": [640, 360], "spp": 32, "max_depth": 3},
         "camera": {"origin": cam["origin"], "target": cam["target"], "fov": cam["fov"]},
         "lights": [sun_for(cam)],
-        "materials": {"landscape": landscape_material(zlo, zhi, result.sea_level)},
+        "materials": {"landscape": landscape_material(zlo, zhi, result.sea_level, *_geology(result, base, zhi),
+                                                      preset=stats["preset"], cell=stats["cell_size"])},
         # The far ground plane lies under the terrain's prism: inside the solid the implicit
         # field is constant (no gradient, no normal) and a surface there would shade as NaN.
         "meshes": [{"shape": "disk", "translate": [0.5 * (x0 + x1), 0.5 * (y0 + y1), base - 0.01 * (zhi - zlo) - 0.05],

@@ -16,7 +16,9 @@ Sun
 Material
     The ``terrain`` triplanar preset (rock, sand, grass, snow) with its layer
     heights rescaled to the DEM's elevation range, so that a 6 km DEM is not all
-    snow and a 100 m one not all sand.
+    snow and a 100 m one not all sand; the rock coloured by the preset's own
+    geology (strata palette, cavity, wetness at sea level:
+    :func:`arches_render.materials.masks.terrain_look`).
 """
 
 from __future__ import annotations
@@ -26,6 +28,8 @@ import math
 import re
 
 import numpy as np
+
+from arches_render.materials.masks import terrain_look
 
 __all__ = ["toml_text", "frame_camera", "landscape_material", "sun_for"]
 
@@ -163,12 +167,21 @@ def sun_for(camera, elevation=35.0, turn=55.0):
     return {"type": "sunsky", "elevation": float(elevation), "azimuth": float(az), "turbidity": 3.0}
 
 
-def landscape_material(zlo, zhi, sea_level=None):
+# -- lookdev (issue 15): the rock's strata palette per preset ----------------------------------
+#: Chalk and limestone coasts and karst, sandstone canyons and layer cakes, banded badlands.
+STRATA_PALETTE = {"sea": "limestone", "river": "sandstone", "karst": "limestone", "hoodoos": "badlands",
+                  "strata": "sandstone"}
+
+
+def landscape_material(zlo, zhi, sea_level=None, geology=None, box=None, preset=None, cell=1.0):
     """The ``terrain`` triplanar preset with layer heights fitted to ``[zlo, zhi]``.
 
     Sand covers low flats (up to 12 % of the relief, or a little above sea level),
     grass gentle slopes from 10 % to 75 %, and snow only the top 5 % of a relief
-    of more than 300 m.
+    of more than 300 m. With ``geology`` (the built resistance node of the scene's
+    ``[nodes.geology]``) and ``box`` (the rock's volume), the rock takes the
+    strata colours of the preset's palette (:data:`STRATA_PALETTE`), the cavity
+    term (reach two cells) and, with ``sea_level``, a wet band.
     """
     relief = max(zhi - zlo, 1e-3)
     sand_top = zlo + 0.12 * relief if sea_level is None else sea_level + 0.06 * relief
@@ -179,4 +192,8 @@ def landscape_material(zlo, zhi, sea_level=None):
         "snow.height_min": zhi - 0.05 * relief if relief > 300 else zhi + relief,
         "snow.height_soft": 0.02 * relief,
     }
-    return {"type": "triplanar", "preset": "terrain", "overrides": over}
+    mat = {"type": "triplanar", "preset": "terrain", "overrides": over}
+    if geology is not None:
+        mat.update(terrain_look(geology, box, STRATA_PALETTE.get(preset, "sandstone"), "geology", sea_level,
+                                cavity_radius=2.0 * cell))
+    return mat

@@ -1,0 +1,362 @@
+"""Layer textures of the ``triplanar`` BSDF: loading, and tiling that does not repeat.
+
+A triplanar layer repeats its texture every ``scale`` metres. Across a landscape
+a plain repeat (``tiling = "repeat"``) shows as a grid of identical patches, from
+a few metres to the horizon. The default ``tiling = "histogram"`` hides it with
+the histogram-preserving blending of randomly offset tiles of Heitz and Neyret
+(2018):
+
+1. **Gaussianisation** (pre-computed, numpy): each channel ``c`` of the texture
+   ``T`` is mapped through its own rank transform to a standard normal texture
+   ``G = Phi^-1(F_T(T))`` (average ranks for tied 8-bit values, so equal texels
+   stay equal). ``F_T^-1`` is kept as a look-up table.
+2. **Triangle grid** (per shading point): the texture coordinates ``uv`` (in
+   texture periods) are split into equilateral triangles of edge
+   :data:`TRIANGLE_EDGE` periods. With the lattice basis ``e1 = (1, 0)`` and
+   ``e2 = (1/2, sqrt(3)/2)`` (times the edge), the skewed coordinates are
+   ``t = uv_y / (a sqrt(3)/2)``, ``s = uv_x / a - t / 2``; the integer part picks
+   the cell, and ``f_s + f_t < 1`` the lower triangle with vertices
+   ``(0,0), (1,0), (0,1)`` and barycentric weights ``(1 - f_s - f_t, f_s, f_t)``,
+   else the upper one ``(1,1), (1,0), (0,1)`` with ``(f_s + f_t - 1, 1 - f_t, 1 - f_s)``.
+   Each vertex ``v`` hashes to a random offset ``o_v`` in ``[0, 1)^2``.
+3. **Variance-preserving blend**: ``g = sum_v w_v G(uv + o_v) / sqrt(sum_v w_v^2)``,
+   again standard normal wherever the three tiles are uncorrelated, so the blend
+   keeps the texture's contrast instead of washing it out as a linear blend does.
+4. **Back to the texture's histogram**: ``T = F_T^-1(Phi(g))``.
+
+Filtering (a deviation, documented): Heitz and Neyret pre-filter the look-up table
+per MIP level. Our layer textures are sampled without MIP maps, so the footprint
+of a pixel (``footprint``, metres, see :mod:`arches_render.materials.detail`) selects
+a level ``l = log2(footprint / texel)`` and the table of that level,
+``F_l(u) = E_z[F_T^-1(Phi(s_l Phi^-1(u) + sqrt(1 - s_l^2) z))]`` with ``z ~ N(0, 1)``
+(Gauss-Hermite quadrature), where ``s_l`` is the standard deviation of the
+Gaussian texture box-filtered to level ``l``. At level 0 this is ``F_T^-1``; as the
+footprint covers the whole texture (``s_l -> 0``) it tends to the texture's mean,
+which is what an area-filtered lookup returns. A pixel thus averages to the right
+value at every distance and the unfiltered lookups no longer alias: their
+contrast fades with the footprint. The level is interpolated linearly
+(the table is a 2-D texture: ``u`` along x, level along y).
+
+``tiling = "bands"`` offsets the tiles along the texture's ``u`` only, for banded
+textures (``strata.png``) whose rows must stay aligned so that bands stay
+continuous across tiles. Colour textures are Gaussianised per channel (Heitz and
+Neyret decorrelate the channels first; our bundled textures are grey, where the
+two agree).
+
+References
+----------
+Heitz, E., Neyret, F. (2018). High-performance by-example noise using a
+histogram-preserving blending operator. Proceedings of the ACM on Computer
+Graphics and Interactive Techniques 1(2), article 31 (HPG 2018).
+Burley, B. (2019). On histogram-preserving blending for randomized texture
+tiling. Journal of Computer Graphics Techniques 8(4) (variance-preserving blend
+and its look-up tables, the same operator explained step by step).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+from scipy import special, stats
+
+__all__ = ["TEXTURE_DIR", "TILINGS", "TRIANGLE_EDGE", "texture_path", "load_texture", "RepeatTexture",
+           "HistogramTexture", "gaussianize", "filter_tables", "triangle_grid"]
+
+TEXTURE_DIR = Path(__file__).resolve().parent / "textures"
+#: Tiling modes of a layer (``layer{i}_tiling``).
+TILINGS = ("histogram", "bands", "repeat")
+#: Edge of the triangles of the tiling grid, in texture periods (Heitz and Neyret's
+#: grid, ``uv * 2 sqrt(3)`` skewed, has edges of about 0.33 periods; larger patches
+#: keep more of the texture's structure, smaller ones blend more often).
+TRIANGLE_EDGE = 0.4
+#: Entries of the inverse-CDF tables along ``u``, and Gauss-Hermite nodes of the
+#: filtered tables.
+LUT_SIZE, HERMITE_NODES = 256, 24
+
+_SQRT3_2 = math.sqrt(3.0) / 2.0
+_CACHE: dict = {}
+
+
+def texture_path(name: str) -> Path:
+    """Resolve a layer texture name.
+
+    Parameters
+    ----------
+    name : str
+        File name inside :data:`TEXTURE_DIR` or an absolute path.
+
+    Returns
+    -------
+    pathlib.Path
+
+    Raises
+    ------
+    ValueError
+        When the file does not exist (the message lists the bundled textures).
+    """
+    path = Path(name)
+    if not path.is_absolute():
+        path = TEXTURE_DIR / name
+    if not path.is_file():
+        bundled = sorted(p.name for p in TEXTURE_DIR.glob("*.png"))
+        raise ValueError(f"triplanar: texture '{name}' not found; bundled textures: "
+                         f"{', '.join(bundled)} (or give an absolute path)")
+    return path
+
+
+def _read(path: Path, srgb: bool, normalize: bool) -> np.ndarray:
+    """``(H, W, C)`` float32 texels, linear, rows flipped so that +v is up on cliffs."""
+    bmp = mi.Bitmap(str(path))
+    grey = bmp.pixel_format() in (mi.Bitmap.PixelFormat.Y, mi.Bitmap.PixelFormat.YA)
+    if not srgb:
+        # Data textures: take the stored numbers as they are.
+        bmp.set_srgb_gamma(False)
+    bmp = bmp.convert(mi.Bitmap.PixelFormat.Y if grey else mi.Bitmap.PixelFormat.RGB,
+                      mi.Struct.Type.Float32, srgb_gamma=False)
+    arr = np.array(bmp, dtype=np.float32).reshape(bmp.height(), bmp.width(), -1)
+    # Image rows run downwards; flip so that +v (world +Z on the side
+    # projections) shows the image upright on cliffs.
+    arr = np.ascontiguousarray(arr[::-1])
+    if normalize:
+        lum = arr[..., 0] if grey else arr @ np.array([0.2126, 0.7152, 0.0722], np.float32)
+        arr = arr / max(float(lum.mean()), 1e-6)
+    return arr
+
+
+def _texture2f(arr: np.ndarray, wrap) -> "mi.Texture2f":
+    if arr.shape[2] == 3 and mi.variant().startswith("cuda"):
+        # Hardware textures take 1, 2 or 4 channels.
+        arr = np.concatenate([arr, np.ones_like(arr[..., :1])], axis=2)
+    return mi.Texture2f(mi.TensorXf(np.ascontiguousarray(arr, np.float32)), use_accel=True,
+                        filter_mode=dr.FilterMode.Linear, wrap_mode=wrap)
+
+
+def _colour(v) -> "mi.Color3f":
+    return mi.Color3f(v[0], v[1], v[2]) if len(v) >= 3 else mi.Color3f(v[0])
+
+
+def gaussianize(arr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rank transform of each channel to a standard normal, and its inverse table.
+
+    Parameters
+    ----------
+    arr : numpy.ndarray
+        ``(H, W, C)`` texels.
+
+    Returns
+    -------
+    gauss : numpy.ndarray
+        ``(H, W, C)`` float32, ``Phi^-1((rank - 1/2) / N)`` per channel (average
+        ranks: tied texels map to one value).
+    lut : numpy.ndarray
+        ``(LUT_SIZE, C)`` float32: the texture's quantile function ``F_T^-1`` at
+        ``u_j = (j + 1/2) / LUT_SIZE``.
+    """
+    h, w, c = arr.shape
+    gauss = np.empty_like(arr, dtype=np.float32)
+    u = (np.arange(LUT_SIZE) + 0.5) / LUT_SIZE
+    lut = np.empty((LUT_SIZE, c), np.float32)
+    for k in range(c):
+        v = arr[..., k].ravel().astype(np.float64)
+        rank = stats.rankdata(v, method="average")
+        gauss[..., k] = special.ndtri((rank - 0.5) / v.size).reshape(h, w)
+        lut[:, k] = np.quantile(v, u)
+    return gauss, lut
+
+
+def filter_tables(gauss: np.ndarray, lut: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse-CDF tables pre-filtered per MIP level (see the module docstring).
+
+    Parameters
+    ----------
+    gauss : numpy.ndarray
+        ``(H, W, C)`` Gaussianised texture (:func:`gaussianize`).
+    lut : numpy.ndarray
+        ``(LUT_SIZE, C)`` level-0 table.
+
+    Returns
+    -------
+    tables : numpy.ndarray
+        ``(levels, LUT_SIZE, C)`` float32, ``F_l`` per level ``l = 0 .. log2(min(H, W))``.
+    sigma : numpy.ndarray
+        ``(levels,)`` the relative standard deviation ``s_l`` of each level.
+    """
+    h, w, c = gauss.shape
+    levels = int(math.log2(min(h, w))) + 1
+    g = gauss.astype(np.float64)
+    sd0 = g.std()
+    sig = []
+    for _ in range(levels):
+        sig.append(min(float(g.std() / sd0), 1.0))
+        hh, ww = g.shape[0] // 2 * 2, g.shape[1] // 2 * 2
+        if hh >= 2 and ww >= 2:
+            g = g[:hh, :ww].reshape(hh // 2, 2, ww // 2, 2, c).mean(axis=(1, 3))
+    sig[-1] = 0.0  # the whole texture in one footprint: its mean
+    z, wz = np.polynomial.hermite_e.hermegauss(HERMITE_NODES)
+    wz = wz / wz.sum()
+    x = special.ndtri((np.arange(LUT_SIZE) + 0.5) / LUT_SIZE)
+    u_lut = (np.arange(LUT_SIZE) + 0.5) / LUT_SIZE
+    tables = np.empty((levels, LUT_SIZE, c), np.float32)
+    for i, s in enumerate(sig):
+        q = special.ndtr(s * x[:, None] + math.sqrt(max(1.0 - s * s, 0.0)) * z[None, :])
+        for k in range(c):
+            tables[i, :, k] = np.interp(q, u_lut, lut[:, k]) @ wz
+    return tables, np.asarray(sig)
+
+
+def _hash2(ix, iy, seed):
+    """Two uniform numbers in ``[0, 1)`` from an integer lattice vertex (Wellons' lowbias32 mix)."""
+    h = mi.UInt32(ix) * 0x8DA6B343 ^ mi.UInt32(iy) * 0xD8163841 ^ seed
+    h ^= h >> 16
+    h *= 0x7FEB352D
+    h ^= h >> 15
+    h *= 0x846CA68B
+    h ^= h >> 16
+    return mi.Float(h & 0xFFFF) * (1.0 / 65536.0), mi.Float(h >> 16) * (1.0 / 65536.0)
+
+
+def triangle_grid(uv, edge=TRIANGLE_EDGE):
+    """Barycentric weights and lattice vertices of the triangle holding ``uv``.
+
+    Parameters
+    ----------
+    uv : mi.Point2f
+        Coordinates in texture periods.
+    edge : float
+        Triangle edge, in the same units.
+
+    Returns
+    -------
+    (list of mi.Float, list of (mi.Int32, mi.Int32))
+        Three weights (summing to 1) and the three vertices' integer lattice
+        coordinates (see the module docstring).
+    """
+    t = uv.y * (1.0 / (edge * _SQRT3_2))
+    s = uv.x * (1.0 / edge) - 0.5 * t
+    bs, bt = dr.floor(s), dr.floor(t)
+    fs, ft = s - bs, t - bt
+    i, j = mi.Int32(bs), mi.Int32(bt)
+    lower = fs + ft < 1.0
+    w0 = dr.select(lower, 1.0 - fs - ft, fs + ft - 1.0)
+    w1 = dr.select(lower, fs, 1.0 - ft)
+    w2 = dr.select(lower, ft, 1.0 - fs)
+    v0 = (dr.select(lower, i, i + 1), dr.select(lower, j, j + 1))
+    return [w0, w1, w2], [v0, (i + 1, j), (i, j + 1)]
+
+
+class RepeatTexture:
+    """A texture repeated every period (``tiling = "repeat"``): one bilinear lookup."""
+
+    def __init__(self, arr: np.ndarray):
+        self.channels = arr.shape[2]
+        self.tex = _texture2f(arr, dr.WrapMode.Repeat)
+        self.texels = min(arr.shape[0], arr.shape[1])
+
+    def eval(self, uv, footprint=None, active=True):
+        """Texel at ``uv`` (texture periods); ``footprint`` is ignored. Returns ``mi.Color3f``."""
+        return _colour(self.tex.eval(uv, active))
+
+
+class HistogramTexture:
+    """Heitz and Neyret's histogram-preserving tiling of one texture (see the module docstring).
+
+    Parameters
+    ----------
+    arr : numpy.ndarray
+        ``(H, W, C)`` linear texels.
+    bands : bool
+        Offset tiles along ``u`` only.
+    seed : int
+        Salt of the tile offsets (layers sharing a texture take different tiles).
+    """
+
+    def __init__(self, arr: np.ndarray, bands: bool = False, seed: int = 0):
+        gauss, lut = gaussianize(arr)
+        tables, sigma = filter_tables(gauss, lut)
+        self.channels = arr.shape[2]
+        self.texels = min(arr.shape[0], arr.shape[1])
+        self.levels = tables.shape[0]
+        self.sigma = sigma
+        self.bands = bool(bands)
+        self.gauss = _texture2f(gauss, dr.WrapMode.Repeat)
+        # Level along y, u along x; clamped at both ends.
+        self.lut = _texture2f(tables, dr.WrapMode.Clamp)
+        self.seed = dr.opaque(mi.UInt32, int(seed) & 0xFFFFFFFF)
+
+    def level(self, footprint):
+        """Continuous filter level of a footprint given in texels (0: full detail)."""
+        return dr.clip(dr.log2(dr.maximum(footprint, 1.0)), 0.0, self.levels - 1.0)
+
+    def eval(self, uv, footprint=None, active=True):
+        """Tiled texel at ``uv`` (texture periods).
+
+        Parameters
+        ----------
+        uv : mi.Point2f
+        footprint : mi.Float, optional
+            Pixel footprint in texels (``None``: full detail).
+        active : mi.Bool
+
+        Returns
+        -------
+        mi.Color3f
+        """
+        weights, verts = triangle_grid(uv)
+        g = [mi.Float(0.0) for _ in range(self.channels)]
+        for w, (i, j) in zip(weights, verts):
+            ox, oy = _hash2(i, j, self.seed)
+            if self.bands:
+                oy = mi.Float(0.0)
+            v = self.gauss.eval(mi.Point2f(uv.x + ox, uv.y + oy), active)
+            for k in range(self.channels):
+                g[k] += w * v[k]
+        norm = dr.rsqrt(dr.maximum(dr.square(weights[0]) + dr.square(weights[1]) + dr.square(weights[2]),
+                                   1e-8))
+        lv = mi.Float(0.0) if footprint is None else self.level(footprint)
+        y = (lv + 0.5) * (1.0 / self.levels)
+        out = []
+        for k in range(self.channels):
+            u = 0.5 * (1.0 + dr.erf(g[k] * norm * (1.0 / math.sqrt(2.0))))
+            # Table texel centres sit at (j + 1/2) / LUT_SIZE, as the quantiles do.
+            out.append(self.lut.eval(mi.Point2f(u, y), active)[k])
+        return _colour(out)
+
+
+def load_texture(name: str, srgb: bool = True, normalize: bool = True, tiling: str = "histogram",
+                 seed: int = 0):
+    """The sampler of a layer texture, built once per (variant, file, decoding, tiling, seed).
+
+    Parameters
+    ----------
+    name : str
+        As for :func:`texture_path`.
+    srgb, normalize : bool
+        Decode from sRGB; divide by the mean luminance.
+    tiling : str
+        One of :data:`TILINGS`.
+    seed : int
+        Tile-offset salt (histogram tilings).
+
+    Returns
+    -------
+    RepeatTexture or HistogramTexture
+
+    Raises
+    ------
+    ValueError
+        Unknown tiling or missing file.
+    """
+    if tiling not in TILINGS:
+        raise ValueError(f"triplanar: tiling '{tiling}' is not one of {', '.join(TILINGS)}")
+    path = texture_path(name)
+    key = (mi.variant(), str(path), bool(srgb), bool(normalize), tiling,
+           0 if tiling == "repeat" else int(seed))
+    if key not in _CACHE:
+        arr = _read(path, bool(srgb), bool(normalize))
+        _CACHE[key] = RepeatTexture(arr) if tiling == "repeat" else \
+            HistogramTexture(arr, bands=tiling == "bands", seed=seed)
+    return _CACHE[key]
