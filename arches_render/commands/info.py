@@ -1,4 +1,4 @@
-"""``arches-render info SCENE``: render settings, lights, materials and the field's numbers."""
+"""``arches-render info SCENE``: render settings, cameras, lights, materials and the field's numbers."""
 
 from __future__ import annotations
 
@@ -21,6 +21,9 @@ def run(args) -> int:
     s = desc.render
     print(f"render     {s.width}x{s.height}, {s.spp} spp, seed {s.seed}, geometry {s.geometry}, "
           f"max_depth {s.max_depth}")
+    for k, (name, c) in enumerate(desc.cameras.items()):
+        print(f"{'cameras' if k == 0 else '':11s}{name}: origin [{', '.join(f'{v:.6g}' for v in c.origin)}], "
+              f"target [{', '.join(f'{v:.6g}' for v in c.target)}], fov {c.fov:g}")
     print(f"lights     {', '.join(l['type'] for l in desc.lights)}")
     print(f"materials  {', '.join(desc.materials)}")
     print(f"meshes     {len(desc.meshes)}")

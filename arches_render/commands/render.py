@@ -2,7 +2,7 @@
 
 Options override the scene's ``[render]`` table (see the README's command list):
 ``-o`` (default ``out/SCENE.exr``), ``--spp``, ``--resolution``, ``--seed``,
-``--geometry field|mesh``, ``--passes``, ``--voxel``, ``--no-aovs``, ``--denoise``,
+``--camera NAME``, ``--geometry field|mesh``, ``--passes``, ``--voxel``, ``--no-aovs``, ``--denoise``,
 ``--view``, ``--tiles``, ``--workers``/``--scheduler`` (Dask) and ``-q``. A progress
 bar on stderr counts the sample passes (or tiles).
 """
@@ -30,6 +30,8 @@ def register(subparsers) -> None:
     r.add_argument("--spp", type=bounded_int("--spp", 1, 1 << 20), help="samples per pixel")
     r.add_argument("--resolution", type=resolution, help="WxH, e.g. 640x360")
     r.add_argument("--seed", type=bounded_int("--seed", 0, 2 ** 31 - 1), help="sampler seed")
+    r.add_argument("--camera", metavar="NAME", help="render through the scene's camera NAME "
+                                                    "([cameras.NAME]; default: the first camera)")
     r.add_argument("--geometry", choices=("field", "mesh"),
                    help="sphere-trace the field (default) or render its marching-cubes mesh")
     r.add_argument("--passes", type=bounded_int("--passes", 1, 4096), help="sample passes")
@@ -51,6 +53,7 @@ def register(subparsers) -> None:
 
 def run(args) -> int:
     desc = load_scene(args.scene)
+    cam = desc.select_camera(args.camera)
     out = output_file(args.output, ".exr") if args.output else Path("out") / f"{Path(args.scene).stem}.exr"
     view = args.view or "srgb"
     if view not in VIEWS:
@@ -68,7 +71,8 @@ def run(args) -> int:
 
     t0 = time.perf_counter()
     job = RenderJob(scene=str(Path(args.scene).resolve()), width=width, height=height, spp=spp, seed=seed,
-                    passes=args.passes or s.passes, geometry=geometry, aovs=aovs, voxel=args.voxel or 0.0)
+                    passes=args.passes or s.passes, geometry=geometry, aovs=aovs, voxel=args.voxel or 0.0,
+                    camera=(tuple(cam.origin), tuple(cam.target), tuple(cam.up), cam.fov))
     if tiles:
         bar = Progress(f"render {desc.name}", "tile", args.quiet)
         if args.scheduler or args.workers:
@@ -91,7 +95,6 @@ def run(args) -> int:
     if args.denoise:
         denoised = denoise(img, layers["albedo"][0], layers["normal"][0])
     elapsed = time.perf_counter() - t0
-    cam = desc.camera
     header = render_header(desc.name, args.scene, seed, spp, width, height, geometry,
                            (cam.origin, cam.target, cam.up, cam.fov), tiles=tiles)
     write_render(out, img, layers, header, denoised)

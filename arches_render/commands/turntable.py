@@ -3,7 +3,7 @@
 ::
 
     arches-render turntable SCENE -o DIR [--frames N] [--spp N] [--resolution WxH] [--seed S]
-                            [--mp4] [--view VIEW] [--denoise] [--no-aovs]
+                            [--camera NAME] [--mp4] [--view VIEW] [--denoise] [--no-aovs]
                             [--workers N | --scheduler ADDRESS] [-q]
 
 Frames go to ``DIR/NAME.####.exr`` from 1001 (see :mod:`arches_render.render.turntable`);
@@ -35,6 +35,8 @@ def register(subparsers) -> None:
     t.add_argument("--spp", type=bounded_int("--spp", 1, 1 << 20), help="samples per pixel")
     t.add_argument("--resolution", type=resolution, help="WxH, e.g. 640x360")
     t.add_argument("--seed", type=bounded_int("--seed", 0, 2 ** 31 - 1), help="sampler seed")
+    t.add_argument("--camera", metavar="NAME", help="orbit from the scene's camera NAME "
+                                                    "([cameras.NAME]; default: the first camera)")
     t.add_argument("--passes", type=bounded_int("--passes", 1, 4096), help="sample passes per frame")
     t.add_argument("--mp4", action="store_true", help="also write DIR/NAME.mp4 (H.264 preview)")
     t.add_argument("--fps", type=bounded_int("--fps", 1, 240), default=24, help="MP4 frame rate")
@@ -54,6 +56,7 @@ def run(args) -> int:
     if view not in VIEWS:
         raise UsageError(f"--view must be one of {', '.join(VIEWS)} (got {view!r})")
     desc = load_scene(args.scene)
+    desc.select_camera(args.camera)
     out = Path(args.output)
     if out.suffix.lower() in (".exr", ".mp4", ".png"):
         raise UsageError(f"-o/--output is a folder for the frames (got {out})")

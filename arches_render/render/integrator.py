@@ -54,6 +54,7 @@ import mitsuba as mi
 from ..backend import variant_class
 from .aovs import aov_channel_names, primary_aovs
 from .heightfield_caster import make_tracer
+from .sphere_tracer import position_ulps
 
 __all__ = ["ImplicitPathIntegrator", "mis_weight", "register"]
 
@@ -113,8 +114,10 @@ class _ImplicitPathImpl:
         tmax = dr.select(si.is_valid(), si.t, ray.maxt)
         hit, t = self.tracer.trace(ray.o, ray.d, tmax, active)
         p, n = self.tracer.surface(ray.o + ray.d * t, t, ray.d)
-        # Lift the point off the surface so that rays spawned here start in air.
-        offset = dr.maximum(1e-5 * self.tracer.scale_op, 0.1 * self.tracer.eps * t)
+        # Lift the point off the surface so that rays spawned here start in air: a
+        # tenth of the hit tolerance, at least a few float32 ulps of the position (a
+        # fixed fraction of the scene's size would be metres on a 1000 km tile).
+        offset = dr.maximum(0.1 * self.tracer.eps * t, position_ulps(p, 32.0))
         sf = dr.zeros(mi.SurfaceInteraction3f)
         sf.t = t
         sf.p = p + n * offset

@@ -32,9 +32,53 @@ PASS_SPP = 16
 MAX_PASSES = 4096
 
 
+def clip_planes(lo, hi) -> tuple[float, float]:
+    """Near and far clip distances for cameras inside the box ``[lo, hi]``.
+
+    Every point of the box is within its diagonal ``D`` of a camera inside it, so
+    ``far = 2 D`` keeps the whole scene (tiles of 1000 km, far-field rings
+    to the horizon) and ``near = min(1 cm, 1e-4 D)`` clips nothing of a small scene.
+    The planes bound the camera rays only (``mint``/``maxt``), so their ratio costs
+    no precision.
+
+    Parameters
+    ----------
+    lo, hi : array_like
+        Corners of the scene's box (geometry and camera positions), metres.
+
+    Returns
+    -------
+    (float, float)
+        ``(near, far)`` in metres.
+    """
+    D = float(np.linalg.norm(np.asarray(hi, np.float64) - np.asarray(lo, np.float64)))
+    D = max(D, 1e-3) if math.isfinite(D) else 1e7
+    return min(0.01, 1e-4 * D), 2.0 * D + 1.0
+
+
+def scene_box(desc, bbox=None) -> tuple[np.ndarray, np.ndarray]:
+    """Box of the field's bounds, every camera of ``desc`` and a Mitsuba ``bbox`` (meshes)."""
+    cams = getattr(desc, "cameras", None) or {"camera": desc.camera}
+    pts = [np.asarray(c.origin, np.float64) for c in cams.values()]
+    pts += [np.asarray(c.target, np.float64) for c in cams.values()]
+    lo, hi = np.min(pts, axis=0), np.max(pts, axis=0)
+    if desc.field is not None:
+        flo, fhi = (np.asarray(v, np.float64) for v in desc.field.bounds())
+        ok = np.isfinite(flo) & np.isfinite(fhi)
+        lo, hi = np.where(ok, np.minimum(lo, flo), lo), np.where(ok, np.maximum(hi, fhi), hi)
+    if bbox is not None and bbox.valid():
+        lo, hi = np.minimum(lo, np.array(bbox.min, np.float64)), np.maximum(hi, np.array(bbox.max, np.float64))
+    return lo, hi
+
+
 def sensor_dict(desc, width, height, crop=None) -> dict:
-    """Perspective camera of the scene; ``crop = (x0, y0, w, h)`` renders a window only."""
+    """Perspective camera of the scene; ``crop = (x0, y0, w, h)`` renders a window only.
+
+    Clip planes come from :func:`clip_planes` of the field and the cameras
+    (:func:`build_scene` widens them to the meshes once they are loaded).
+    """
     cam = desc.camera
+    near, far = clip_planes(*scene_box(desc))
     film = {"type": "hdrfilm", "width": int(width), "height": int(height),
             "pixel_format": "rgb", "rfilter": {"type": "box"}}
     if crop is not None:
@@ -44,8 +88,8 @@ def sensor_dict(desc, width, height, crop=None) -> dict:
         "type": "perspective",
         "fov": cam.fov,
         "fov_axis": "x",
-        "near_clip": 0.01,
-        "far_clip": 1e5,
+        "near_clip": near,
+        "far_clip": far,
         "to_world": mi.ScalarTransform4f().look_at(origin=cam.origin, target=cam.target, up=cam.up),
         "sampler": {"type": "independent"},
         "film": film,
@@ -184,6 +228,12 @@ def build_scene(desc, geometry=None, width=None, height=None, voxel=None, progre
                            "eps": s.eps, "omega": s.omega, "aovs": bool(aovs)}
         scene = mi.load_dict(d)
         scene.integrator().attach(desc.field, field_bsdf)
+    # Clip planes for the whole scene, meshes included (a far-field ring reaches the
+    # horizon): an edit before the first render compiles nothing more.
+    near, far = clip_planes(*scene_box(desc, scene.bbox()))
+    params = mi.traverse(scene)
+    params["sensor.near_clip"], params["sensor.far_clip"] = near, far
+    params.update()
     attach_atmosphere(scene, desc)
     set_pixel_spread(scene, desc.camera.fov, width or s.width)
     return scene

@@ -32,6 +32,19 @@ from ..field.culling import with_culling
 from ..field.node import finite_box
 
 
+def position_ulps(p, ulps):
+    """``ulps`` float32 units in the last place of the largest coordinate of ``p`` (plus 1e-6 m).
+
+    Rounding of a position, and of a field value computed from it, is a few ulps of
+    its largest coordinate: gradient taps (64 ulps: 1e-3 relative error) and ray
+    offsets (32: well above the noise of ``f``) scale with it, not with the scene's
+    size (issue 14: a fixed fraction of a 1000 km tile is metres, far coarser than a
+    close shot needs near the origin).
+    """
+    m = dr.maximum(dr.maximum(dr.abs(p.x), dr.abs(p.y)), dr.abs(p.z))
+    return ulps * 1.1920929e-7 * m + 1e-6
+
+
 def ray_box(o, d, lo, hi):
     """Slab test: entry and exit distances of the ray ``o + t d`` through ``[lo, hi]``
     (``lo``, ``hi``: three floats or three ``mi.Float``)."""
@@ -143,7 +156,8 @@ class SphereTracer:
             deep in an implicit heightfield whose value is constant there) the
             normal faces the ray, ``-d`` (or +Z without ``d``), instead of NaN.
         """
-        h = dr.maximum(1e-5 * self.scale_op, 0.5 * self.eps * t)
+        # Gradient taps half the tolerance apart, never below the float32 resolution of p.
+        h = dr.maximum(0.5 * self.eps * t, position_ulps(p, 64.0))
         g = gradient(self.field, p, h, culled=True)
         f = self.field.eval_bounds(p, ())[0]
         g2 = dr.squared_norm(g)

@@ -9,6 +9,11 @@ A scene file is data, never code. Top-level tables:
                  tolerance, default 2e-4: well below a pixel, since a tolerance
                  near a pixel inflates every silhouette), ``omega``
 ``[camera]``     ``origin``, ``target``, ``up`` (default +Z), ``fov`` (degrees, horizontal)
+``[cameras.NAME]`` named cameras with the keys of ``[camera]`` (``SceneDescription.cameras``,
+                 in file order after ``[camera]``, which is named ``"camera"``); a
+                 scene needs ``[camera]`` or at least one named camera; the first
+                 is ``desc.camera`` unless ``select_camera`` picks another
+                 (``render``/``turntable --camera NAME``)
 ``[[lights]]``   ``type`` = ``sunsky`` | ``directional`` | ``point`` | ``constant`` | ``envmap``
 ``[materials.NAME]`` ``type = "triplanar"`` with ``preset``, ``overrides``,
                  ``masks = [{layer, [kind], node, lo, hi}]`` (a layer's coverage times
@@ -108,7 +113,8 @@ class SceneDescription:
     name: str
     description: str
     render: RenderSettings
-    camera: Camera
+    camera: Camera                                      # the selected camera (default: the first)
+    cameras: dict = dc_field(default_factory=dict)      # name -> Camera, in file order
     lights: list = dc_field(default_factory=list)       # Mitsuba emitter dicts
     materials: dict = dc_field(default_factory=dict)    # name -> Mitsuba BSDF dict
     material_masks: dict = dc_field(default_factory=dict)  # name -> [(layer, node, lo, hi, kind)]
@@ -119,12 +125,54 @@ class SceneDescription:
     tables: dict = dc_field(default_factory=dict)       # generators' [[NAME]] -> parsed items
     atmosphere: AtmosphereSettings | None = None
 
+    def select_camera(self, name: str | None) -> Camera:
+        """Make camera ``name`` (``None``: keep the current one) the scene's camera and return it.
+
+        Raises
+        ------
+        SceneError
+            For an unknown name (the message lists the scene's cameras).
+        """
+        if name is not None:
+            if name not in self.cameras:
+                raise SceneError(self.file, "cameras", f"has no camera {name!r} "
+                                                       f"(cameras: {', '.join(self.cameras)})")
+            self.camera = self.cameras[name]
+        return self.camera
+
     def __getattr__(self, name):
         # A generator's scene table reads as an attribute: desc.rock_piles.
         tables = self.__dict__.get("tables", {})
         if name in tables:
             return tables[name]
         raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
+
+def _camera(c: Table) -> Camera:
+    camera = Camera(origin=c.vector("origin"), target=c.vector("target"),
+                    up=c.vector("up", default=[0.0, 0.0, 1.0], nonzero=True),
+                    fov=c.number("fov", 40.0, lo=0, hi=180, lo_open=True, hi_open=True))
+    if camera.origin == camera.target:
+        raise c.error("target", f"must differ from {c.path}.origin")
+    c.finish()
+    return camera
+
+
+def _cameras(root: Table) -> dict:
+    """``[camera]`` (named ``"camera"``) first, then the ``[cameras.NAME]`` in file order."""
+    cameras = {}
+    if root.has("camera") or not root.has("cameras"):
+        cameras["camera"] = _camera(root.table("camera"))
+    named = root.table("cameras", None)
+    if named is not None:
+        for name in list(named.data):
+            if name in cameras:
+                raise named.error(name, "is the name of the [camera] table: choose another")
+            cameras[name] = _camera(named.table(name))
+        named.finish()
+        if not cameras:
+            raise root.error("cameras", "holds no camera (add [cameras.NAME] with origin and target)")
+    return cameras
 
 
 def _sun_direction(t: Table):
@@ -321,13 +369,8 @@ def parse_scene(data: dict, path) -> SceneDescription:
         raise r.error("max_depth", "must be -1 (unbounded) or an integer in [1, 1024] (got 0)")
     r.finish()
 
-    c = root.table("camera")
-    camera = Camera(origin=c.vector("origin"), target=c.vector("target"),
-                    up=c.vector("up", default=[0.0, 0.0, 1.0], nonzero=True),
-                    fov=c.number("fov", 40.0, lo=0, hi=180, lo_open=True, hi_open=True))
-    if camera.origin == camera.target:
-        raise c.error("target", "must differ from camera.origin")
-    c.finish()
+    cameras = _cameras(root)
+    camera = next(iter(cameras.values()))
 
     lights = [_light(t, base_dir) for t in root.tables("lights")]
     if not lights:
@@ -378,7 +421,7 @@ def parse_scene(data: dict, path) -> SceneDescription:
         raise root.error("field", f"the scene has no geometry: add {', '.join(kinds[:-1])} or {kinds[-1]}")
     root.finish()
     return SceneDescription(file=path, name=name, description=description, render=settings,
-                            camera=camera, lights=lights, materials=materials,
+                            camera=camera, cameras=cameras, lights=lights, materials=materials,
                             material_masks=material_masks, material_nodes=material_nodes, meshes=meshes,
                             field=field_node, field_material=field_material, tables=tables,
                             atmosphere=atmosphere)
