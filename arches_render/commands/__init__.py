@@ -18,11 +18,13 @@ API, :mod:`arches_render.scene`); it imports no command module itself.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
 from tqdm import tqdm
 
+from ..atomic import check_writable
 from ..scene import SceneError
 from ..scene.validate import Table
 
@@ -68,6 +70,19 @@ def positive_float(name):
     return parse
 
 
+def scene_argument(parser, help: str = "scene file (.toml)") -> None:
+    """Add the ``scene`` positional and ``--allow-path DIR`` (repeatable) to a command that reads scenes.
+
+    A scene may read files only inside its own folder and the folders allowed here
+    or in ``$ARCHES_RENDER_PATH`` (:mod:`arches_render.scene.paths`); the CLI applies
+    ``--allow-path`` before the command runs.
+    """
+    parser.add_argument("scene", help=help)
+    parser.add_argument("--allow-path", action="append", default=[], metavar="DIR",
+                        help="let the scene read files under DIR too (repeatable; also $ARCHES_RENDER_PATH, "
+                             "folders separated by ':'); by default a scene reads only inside its own folder")
+
+
 class Progress:
     """A ``progress(done, total)`` callback drawing a tqdm bar on stderr."""
 
@@ -95,6 +110,42 @@ def output_file(text: str, suffix: str) -> Path:
     out = Path(text)
     if out.suffix.lower() != suffix:
         raise UsageError(f"-o/--output must end in {suffix} (got {out})")
+    return out
+
+
+def writable_output(out: Path, folder: bool = False, create: bool = False) -> Path:
+    """Check, before any work, that output ``out`` can be written; return it.
+
+    Parameters
+    ----------
+    out : Path
+        The output file, or with ``folder`` the output folder (turntable frames).
+    folder : bool
+        ``out`` is a folder: it is created if missing (its parent must exist).
+    create : bool
+        Create the missing parent folders too (the default ``out/`` of ``render``).
+
+    Raises
+    ------
+    UsageError
+        ``-o/--output OUT: folder F does not exist`` or ``... is not writable (reason)``.
+    """
+    where = out if folder else out.parent
+    try:
+        if create:
+            where.mkdir(parents=True, exist_ok=True)
+        elif folder and not where.exists() and where.parent.is_dir():
+            where.mkdir()
+    except OSError as exc:
+        raise UsageError(f"-o/--output {out}: cannot create folder {where} ({exc.strerror})") from None
+    if not where.is_dir():
+        raise UsageError(f"-o/--output {out}: folder {where} does not exist" if not where.exists()
+                         else f"-o/--output {out}: {where} is not a folder")
+    try:
+        check_writable(where)
+    except OSError as exc:
+        raise UsageError(f"-o/--output {out}: folder {where} is not writable "
+                         f"({os.strerror(exc.errno) if exc.errno else exc})") from None
     return out
 
 

@@ -33,6 +33,7 @@ import numpy as np
 
 from arches_render import cache
 from arches_render.atomic import atomic_path
+from arches_render.scene.array_files import Spec, read_arrays
 
 from .block_hulls import block_anchors, hull_planes
 from .fracture_discs import STRUCTURES, fracture_discs
@@ -231,17 +232,35 @@ def save_tile(tile: BlockTile, path) -> None:
                                 meta=np.array(meta))
 
 
+#: The arrays of a tile file (:func:`arches_render.scene.array_files.read_arrays` schema).
+TILE_SPECS = {"normals": Spec(("p", 3)), "offsets": Spec(("p",)), "start": Spec(("b",), "integer", lo=0),
+              "count": Spec(("b",), "integer", lo=1), "anchors": Spec(("b", None, 3)),
+              "centroid": Spec(("b", 3)), "meta": Spec((), "string")}
+
+
 def load_tile(path) -> BlockTile:
-    """Read a tile written by :func:`save_tile` (``ValueError`` if it is not one)."""
+    """Read a tile written by :func:`save_tile` (``ValueError`` if it is not one).
+
+    The arrays are checked before use (shapes, finite values, plane ranges inside
+    the plane arrays): the field gathers planes by ``start``/``count``, and an index
+    outside the arrays would read out of bounds.
+    """
     try:
-        with np.load(path, allow_pickle=False) as z:
-            meta = json.loads(str(z["meta"]))
-            if meta.get("version") != FORMAT_VERSION:
-                raise ValueError(f"tile format {meta.get('version')} (expected {FORMAT_VERSION})")
-            arrays = {k: z[k] for k in ("normals", "offsets", "start", "count", "anchors", "centroid")}
-    except (OSError, KeyError, ValueError, json.JSONDecodeError) as exc:
-        raise ValueError(f"{path}: not a block tile ({exc})") from None
-    return BlockTile(size=float(meta["size"]), params=meta["params"], stats=meta["stats"], **arrays)
+        z = read_arrays(path, TILE_SPECS, "block tile")
+        meta = json.loads(str(z.pop("meta")))
+        if not isinstance(meta, dict) or meta.get("version") != FORMAT_VERSION:
+            raise ValueError(f"tile format {meta.get('version') if isinstance(meta, dict) else meta!r} "
+                             f"(expected {FORMAT_VERSION})")
+        size = float(meta["size"])
+        if not (np.isfinite(size) and size > 0):
+            raise ValueError(f"tile size must be > 0 (got {size})")
+        if len(z["start"]) == 0 or int((z["start"] + z["count"]).max()) > len(z["normals"]):
+            raise ValueError(f"block plane ranges start + count must lie in [0, {len(z['normals'])}]")
+        params, stats = dict(meta.get("params", {})), dict(meta.get("stats", {}))
+    except (KeyError, TypeError, ValueError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{Path(getattr(path, 'name', None) or str(path)).name}: not a block tile ({exc})") from None
+    return BlockTile(size=size, params=params, stats=stats,
+                     **{k: v.astype(np.uint32 if k in ("start", "count") else np.float32) for k, v in z.items()})
 
 
 def cached_tile(params: TileParams, folder=None, progress=None) -> BlockTile:

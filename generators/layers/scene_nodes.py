@@ -41,6 +41,7 @@ import numpy as np
 from arches_render.field import Heightfield
 from arches_render.scene.errors import SceneError
 from arches_render.scene.nodes import load_heights
+from arches_render.scene.paths import scene_file
 from arches_render.scene.validate import Table
 
 from .convolution_surface import ConvolutionSurface, MaterialRatio
@@ -112,7 +113,7 @@ def _from_heights(t: Table, H, extent, cell, column):
 def _source(t: Table, ctx) -> MaterialStacks:
     kind = t.string("source", "flat", choices={"flat", "file", "node", "stacks"})
     if kind == "stacks":
-        path = ctx.base_dir / t.string("file")
+        path = scene_file(t, "file", (".npz",), ctx.base_dir, what="stack file")
         try:
             return MaterialStacks.load(path)
         except ValueError as exc:

@@ -17,6 +17,7 @@ sphere about the seed, the "Voronoi embedding sphere"), ``uid``, ``slot``;
 from __future__ import annotations
 
 import json
+import zipfile
 from dataclasses import dataclass
 
 import numpy as np
@@ -99,8 +100,8 @@ class RockStore:
             with np.load(path, allow_pickle=False) as z:
                 meta = json.loads(str(z["meta"]))
                 arrays = {k: z[k] for k in _ARRAYS}
-        except (OSError, KeyError, ValueError) as exc:
-            raise ValueError(f"{path}: not a rock tile file ({exc})") from None
+        except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+            raise ValueError(f"{getattr(path, 'name', path)}: not a rock tile file ({exc})") from None
         if meta.get("format") != FORMAT:
             raise ValueError(f"{path}: tile format {meta.get('format')!r}, expected {FORMAT!r}")
         return cls(meta=meta, **arrays)
