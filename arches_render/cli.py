@@ -41,9 +41,9 @@ def main(argv=None) -> int:
     """Entry point of the ``arches-render`` console script."""
     args = build_parser().parse_args(argv)
     try:
-        paths.allow(getattr(args, "allow_path", None) or ())
         set_variant()
-        return args.func(args)
+        with paths.allowed(getattr(args, "allow_path", None) or ()):
+            return args.func(args)
     except (SceneError, UsageError, ResourceError) as exc:
         print(f"arches-render: error: {exc}", file=sys.stderr)
         return EXIT_USAGE

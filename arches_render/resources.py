@@ -42,6 +42,11 @@ ENV = "ARCHES_RENDER_MEMORY"
 BASE_BYTES = 400 << 20
 
 
+#: The polygonizer's sample batches: 2^21 points as int64 indices, float64 positions,
+#: Dr.Jit float32 coordinates and values (:func:`arches_render.mesh.polygonize.sample_grid`).
+POLY_BATCH_BYTES = 150 << 20
+
+
 class ResourceError(ValueError):
     """A request whose memory estimate exceeds the memory available (one-line message)."""
 
@@ -163,9 +168,9 @@ def render_bytes(width: int, height: int, channels: int) -> int:
 def polygonize_bytes(voxels: float, surface_voxels: float | None = None) -> int:
     """Estimated memory of polygonizing a dense grid of ``voxels`` samples (marching cubes).
 
-    The float32 volume (4 B/voxel) and scikit-image's Lewiner marching cubes, which
+    The float32 volume (4 B/voxel), scikit-image's Lewiner marching cubes, which
     keeps per voxel a few index slices (measured about 4 B/voxel more on a sphere),
-    and per vertex of the output (about ``2 x surface voxels``) the float32
+    the batches of sampled points (:data:`POLY_BATCH_BYTES`), and per vertex of the output (about ``2 x surface voxels``) the float32
     positions, normals and the float64 copies of the normal estimate and winding
     check (about 200 B). ``surface_voxels`` defaults to a sphere's share of a cube
     grid, ``6 n^(2/3)``.
@@ -182,7 +187,7 @@ def polygonize_bytes(voxels: float, surface_voxels: float | None = None) -> int:
     """
     if surface_voxels is None:
         surface_voxels = 6.0 * float(voxels) ** (2.0 / 3.0)
-    return BASE_BYTES + int(8 * float(voxels) + 400 * float(surface_voxels))
+    return BASE_BYTES + POLY_BATCH_BYTES + int(8 * float(voxels) + 400 * float(surface_voxels))
 
 
 def heightmap_bytes(nx: int, ny: int) -> int:

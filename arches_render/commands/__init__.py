@@ -22,9 +22,11 @@ import os
 import sys
 from pathlib import Path
 
+import numpy as np
 from tqdm import tqdm
 
 from ..atomic import check_writable
+from ..resources import BASE_BYTES, check_memory, polygonize_bytes, render_bytes
 from ..scene import SceneError
 from ..scene.validate import Table
 
@@ -147,6 +149,33 @@ def writable_output(out: Path, folder: bool = False, create: bool = False) -> Pa
         raise UsageError(f"-o/--output {out}: folder {where} is not writable "
                          f"({os.strerror(exc.errno) if exc.errno else exc})") from None
     return out
+
+
+def check_render_memory(desc, width: int, height: int, aovs: bool, geometry: str, voxel=None) -> None:
+    """Refuse, before any work, a render whose memory estimate exceeds the machine's.
+
+    The image (:func:`arches_render.resources.render_bytes`: beauty, weight and, with
+    ``aovs``, the AOV channels) and in mesh mode the marching-cubes
+    grid of the field (:func:`arches_render.resources.polygonize_bytes`). The sample
+    count costs time, not memory (the kernels draw samples inside their loop).
+
+    Raises
+    ------
+    arches_render.resources.ResourceError
+    """
+    channels = 4  # beauty and the film's weight
+    if aovs:  # the base layers, one per layer of the field's material, the atmosphere's
+        mat = desc.materials.get(desc.field_material or "", {}) if desc.field is not None else {}
+        channels += 12 + int(mat.get("layer_count", 0)) + (6 if desc.atmosphere is not None else 0)
+    need = render_bytes(width, height, channels)
+    what = [f"rendering {width}x{height} with {channels} film channels"] if width * height else []
+    if geometry == "mesh" and desc.field is not None:
+        lo, hi = (np.asarray(b, np.float64) for b in desc.field.bounds())
+        v = float(voxel or desc.render.voxel or np.max(hi - lo) / 256)
+        voxels = float(np.prod(np.ceil((hi - lo + 2 * v) / v) + 1))
+        need += polygonize_bytes(voxels) - BASE_BYTES
+        what.append(f"polygonizing {voxels:.3g} voxels of {v:g} m")
+    check_memory(need, " and ".join(what))
 
 
 def find_node(data: dict, file, kind: str, name: str | None = None) -> tuple[str, Table]:

@@ -19,7 +19,8 @@ from ..mesh.usd_export import write_usd_stage
 from ..mesh.uv_atlas import uv_atlas
 from ..render.renderer import load_materials
 from ..scene import load_scene
-from . import Progress, UsageError, bounded_int, positive_float, scene_argument, writable_output
+from . import (Progress, UsageError, bounded_int, check_render_memory, positive_float, scene_argument,
+               writable_output)
 
 MESH_FORMATS = (".ply", ".obj", ".glb", ".usd", ".usda", ".usdc")
 
@@ -52,6 +53,7 @@ def run(args) -> int:
         raise UsageError(f"-o/--output must end in .ply, .obj or .glb (a mesh) or .usd, .usda or .usdc "
                          f"(a USD stage) (got {out})")
     writable_output(out)
+    check_render_memory(desc, 0, 0, False, "mesh", args.voxel)
     uv = args.uv or args.bake
     voxel = args.voxel or desc.render.voxel or None
     bsdf = None

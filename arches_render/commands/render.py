@@ -20,8 +20,8 @@ from ..render.jobs import RenderJob, prime_cache, run_job
 from ..render.output import render_header, write_render
 from ..render.renderer import build_scene
 from ..scene import load_scene
-from . import (Progress, UsageError, bounded_int, output_file, positive_float, resolution,
-               scene_argument, writable_output)
+from . import (Progress, UsageError, bounded_int, check_render_memory, output_file, positive_float,
+               resolution, scene_argument, writable_output)
 
 
 def register(subparsers) -> None:
@@ -66,6 +66,7 @@ def run(args) -> int:
     tiles = args.tiles or (0 if not (args.scheduler or args.workers) else 4)
     if tiles and geometry == "mesh":
         raise UsageError("--tiles/--workers/--scheduler render the field; drop --geometry mesh")
+    check_render_memory(desc, width, height, aovs, geometry, args.voxel)
 
     t0 = time.perf_counter()
     job = RenderJob(scene=str(Path(args.scene).resolve()), width=width, height=height, spp=spp, seed=seed,

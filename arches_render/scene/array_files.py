@@ -144,15 +144,15 @@ def _check_values(name, spec: Spec, arr: np.ndarray):
         if bad.any():
             i = np.unravel_index(int(np.argmax(bad)), arr.shape) if arr.ndim else ()
             raise ArrayFileError(f"array {name!r} holds {int(bad.sum())} NaN or infinite values "
-                                 f"(first at index {list(i)}); it must be {spec.describe()}")
+                                 f"(first at index {[int(k) for k in i]}); it must be {spec.describe()}")
     lo_bad = (arr <= spec.lo if spec.lo_open else arr < spec.lo) if spec.lo is not None else None
     hi_bad = (arr >= spec.hi if spec.hi_open else arr > spec.hi) if spec.hi is not None else None
     for bad in (lo_bad, hi_bad):
         if bad is not None and np.any(bad):
             flat = int(np.argmax(bad))
-            i = list(np.unravel_index(flat, arr.shape)) if arr.ndim else []
+            i = [int(k) for k in np.unravel_index(flat, arr.shape)] if arr.ndim else []
             raise ArrayFileError(f"array {name!r} is out of range at index {i} "
-                                 f"(value {arr.reshape(-1)[flat]!r}); it must be {spec.describe()}")
+                                 f"(value {arr.reshape(-1)[flat].item()!r}); it must be {spec.describe()}")
 
 
 def read_arrays(path, specs: dict, what: str = "arrays") -> dict:

@@ -46,6 +46,7 @@ import numpy as np
 
 from .. import extensions, field as F
 from ..field.heightmaps import DEMError, fbm_heightmap, read_dem
+from ..resources import ResourceError, check_memory, heightmap_bytes
 from .array_files import Spec, read_arrays
 from .errors import SceneError
 from .paths import scene_file
@@ -92,6 +93,10 @@ def heightfield_node(t: Table, ctx):
         if (not isinstance(res, list) or len(res) != 2
                 or not all(isinstance(v, int) and 2 <= v <= 8192 for v in res)):
             raise t.error("resolution", f"must be [nx, ny] with integers in [2, 8192] (got {res!r})")
+        try:
+            check_memory(heightmap_bytes(*res), f"the {res[0]}x{res[1]} fBm heightmap")
+        except ResourceError as exc:
+            raise t.error("resolution", str(exc)) from None
         H = fbm_heightmap((x0, y0, x1, y1), res, ridged=t.boolean("ridged", False),
                           power=t.number("power", 1.0, lo=0.1, hi=8.0),
                           offset=t.number("offset", 0.0),

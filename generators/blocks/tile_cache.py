@@ -25,7 +25,6 @@ Paris et al. (2020), sections 4 and 6 (Tables 1 and 2).
 from __future__ import annotations
 
 import json
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -33,6 +32,7 @@ import numpy as np
 
 from arches_render import cache
 from arches_render.atomic import atomic_path
+from arches_render.npzfile import write_npz
 from arches_render.scene.array_files import Spec, read_arrays
 
 from .block_hulls import block_anchors, hull_planes
@@ -162,7 +162,6 @@ def build_tile(params: TileParams, progress=None) -> BlockTile:
     """
     params.validate()
     step = progress or (lambda d, t: None)
-    t0 = time.perf_counter()
     s, r = float(params.size), params.radius()
     pts = poisson_disc_periodic(s, r, seed=params.seed)
     step(1, 4)
@@ -213,7 +212,7 @@ def build_tile(params: TileParams, progress=None) -> BlockTile:
                  mean_points_per_block=float(np.mean(sizes)),
                  samples_in_blocks=float(np.sum(sizes) / len(pts)),
                  mean_planes_per_block=float(n_planes / len(start)), dilation=dilation,
-                 seconds=time.perf_counter() - t0, **gstats)
+                 **gstats)
     return BlockTile(size=s, normals=np.concatenate(normals).astype(np.float32),
                      offsets=np.concatenate(offsets).astype(np.float32),
                      start=np.asarray(start, np.uint32), count=np.asarray(count, np.uint32),
@@ -227,9 +226,9 @@ def save_tile(tile: BlockTile, path) -> None:
                        "stats": tile.stats}, default=list)
     with atomic_path(Path(path)) as tmp:
         with open(tmp, "wb") as fh:
-            np.savez_compressed(fh, normals=tile.normals, offsets=tile.offsets, start=tile.start,
-                                count=tile.count, anchors=tile.anchors, centroid=tile.centroid,
-                                meta=np.array(meta))
+            write_npz(fh, dict(normals=tile.normals, offsets=tile.offsets, start=tile.start,
+                               count=tile.count, anchors=tile.anchors, centroid=tile.centroid,
+                               meta=np.array(meta)), compress=True)
 
 
 #: The arrays of a tile file (:func:`arches_render.scene.array_files.read_arrays` schema).

@@ -34,6 +34,7 @@ from numba import njit
 
 from arches_render.atomic import atomic_path
 from arches_render.field import evaluate
+from arches_render.npzfile import write_npz
 from arches_render.scene.array_files import Spec, read_arrays
 
 #: Material ids. Stable materials (bedrock, sandstone, water) never flow; granular
@@ -348,11 +349,11 @@ class MaterialStacks:
         """Write the stacks to an ``.npz`` file atomically."""
         with atomic_path(path) as tmp:
             with open(tmp, "wb") as f:
-                np.savez_compressed(
-                    f, offsets=self.offsets, material=self.material, count=self.count,
+                write_npz(f, dict(
+                    offsets=self.offsets, material=self.material, count=self.count,
                     grid=np.array([self.nx, self.ny, self.n_levels], dtype=np.int64),
                     geometry=np.array([self.cell, *self.origin, self.dz], dtype=np.float64),
-                    material_names=np.array([MATERIAL_NAMES[i] for i in sorted(MATERIAL_NAMES)]))
+                    material_names=np.array([MATERIAL_NAMES[i] for i in sorted(MATERIAL_NAMES)])), compress=True)
 
     @classmethod
     def load(cls, path) -> "MaterialStacks":

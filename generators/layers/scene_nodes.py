@@ -41,6 +41,7 @@ import numpy as np
 from arches_render.field import Heightfield
 from arches_render.scene.errors import SceneError
 from arches_render.scene.nodes import load_heights
+from arches_render.resources import ResourceError, check_memory, heightmap_bytes
 from arches_render.scene.paths import scene_file
 from arches_render.scene.validate import Table
 
@@ -66,6 +67,10 @@ def _grid(t: Table, extent, cell):
     nx, ny = int(round(nx)), int(round(ny))
     if not (2 <= nx <= 8192 and 2 <= ny <= 8192):
         raise t.error("cell", f"must give between 2 and 8192 columns per axis (got {nx} x {ny})")
+    try:  # the column heights and their stacks: the memory of a heightmap of the grid
+        check_memory(heightmap_bytes(nx, ny), f"a {nx}x{ny} grid of material stacks")
+    except ResourceError as exc:
+        raise t.error("cell", str(exc)) from None
     return nx, ny
 
 

@@ -22,11 +22,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from arches_render.npzfile import write_npz
+
 __all__ = ["RockStore", "FORMAT"]
 
 FORMAT = "arches-rock-tiles/1"
 _ARRAYS = ("vertices", "normals", "faces", "vstart", "fstart", "seed", "radius", "uid", "slot",
            "anchors", "slot_start")
+# Meta entries that measure a build rather than describe the tiles (not written to files).
+_TIMINGS = ("build_seconds", "worker_cpu_seconds")
 
 
 @dataclass
@@ -83,9 +87,13 @@ class RockStore:
                    meta=dict(meta, format=FORMAT, rocks=len(rocks), triangles=int(nf.sum())))
 
     def save(self, path) -> None:
-        """Write an uncompressed ``.npz`` (fast to load) to an open file or path."""
-        np.savez(path, meta=np.array(json.dumps(self.meta)),
-                 **{k: getattr(self, k) for k in _ARRAYS})
+        """Write an uncompressed ``.npz`` (fast to load) to an open file or path.
+
+        The same tiles give the same bytes (:func:`arches_render.npzfile.write_npz`);
+        the build's timings stay in memory only, since they differ run to run.
+        """
+        meta = {k: v for k, v in self.meta.items() if k not in _TIMINGS}
+        write_npz(path, {"meta": np.array(json.dumps(meta)), **{k: getattr(self, k) for k in _ARRAYS}})
 
     @classmethod
     def load(cls, path) -> "RockStore":

@@ -65,6 +65,7 @@ import mitsuba as mi
 import numpy as np
 
 from arches_render.atomic import atomic_write
+from arches_render.npzfile import write_npz
 from arches_render.field.node import Node, opaque_float
 from arches_render.field.noise import fbm, fbm_lipschitz, fbm_range
 from arches_render.field.primitive_set import empty_distance, grid_lists
@@ -420,7 +421,7 @@ def save_npz(path, **arrays) -> None:
     if unknown:
         raise ValueError(f"unknown array(s) {sorted(unknown)}; allowed: {', '.join(NPZ_KEYS)}")
     buf = io.BytesIO()
-    np.savez(buf, **{k: np.asarray(v) for k, v in arrays.items() if v is not None})
+    write_npz(buf, {k: np.asarray(v) for k, v in arrays.items() if v is not None})
     with atomic_write(Path(path)) as f:
         f.write(buf.getvalue())
 
