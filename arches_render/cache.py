@@ -14,23 +14,44 @@ Keys
     with the digest such entries are misses.
 Entries
     :func:`load_or_build` reads an entry, or builds it and writes it atomically
-    (:mod:`arches_render.atomic`). An entry that cannot be read (damaged, foreign,
-    older format) is rebuilt over; a cache folder that cannot be written only costs
-    the time of the next build.
+    (:mod:`arches_render.atomic`). Every entry ends in a 64-byte seal: a magic
+    and format version, the SHA-256 of the payload and of the entry's name (its
+    key), and the payload's length. An entry whose seal is missing (written by
+    another version, or cut short), whose checksum fails (truncated, garbage, a
+    flipped bit) or whose payload the loader refuses is reported in one line on
+    stderr and rebuilt over; a cache folder that cannot be written only costs the
+    time of the next build.
+Concurrency
+    A builder holds an exclusive ``flock`` on ``.NAME.lock`` beside the entry while
+    it builds and writes. A second process (another render, a Dask worker) asking
+    for the same entry waits, then reads the entry the first one wrote: both get
+    the same bits, the tile is built once, and the folder holds one entry. The
+    kernel drops the lock of a killed process, so a kill never blocks the next run;
+    the killed builder's temporary file is removed by the next write
+    (:func:`arches_render.atomic.sweep_stale`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import io
 import json
 import os
+import struct
+import sys
 from pathlib import Path
 
 import platformdirs
 
 from .atomic import atomic_path
 
-__all__ = ["ENV", "cache_root", "cache_dir", "source_digest", "cache_key", "load_or_build"]
+try:  # POSIX; elsewhere concurrent builders both build (still one entry, by the atomic rename)
+    import fcntl
+except ImportError:  # pragma: no cover - Windows
+    fcntl = None
+
+__all__ = ["ENV", "SEAL_MAGIC", "cache_root", "cache_dir", "source_digest", "cache_key", "load_or_build", "report"]
 
 #: The environment variable naming the cache folder.
 ENV = "ARCHES_RENDER_CACHE"
@@ -97,6 +118,78 @@ def _make_folder(folder: Path) -> None:
     (top / ".gitignore").write_text("# arches-render cache\n*\n")
 
 
+#: Seal of an entry: magic + format version, SHA-256 of payload and name, payload length.
+SEAL_MAGIC = b"ARCACHE1"
+_SEAL = struct.Struct("<8s32sQ16s")
+
+
+def _digest(payload: bytes, name: str) -> bytes:
+    return hashlib.sha256(payload + b"\0" + name.encode()).digest()
+
+
+def _seal_file(tmp: Path, name: str) -> None:
+    payload = tmp.read_bytes()
+    with open(tmp, "ab") as f:
+        f.write(_SEAL.pack(SEAL_MAGIC, _digest(payload, name), len(payload),
+                           hashlib.sha256(name.encode()).digest()[:16]))
+
+
+def _unseal(path: Path) -> tuple[bytes | None, str | None]:
+    """The payload of entry ``path``, or ``None`` and why it cannot be used."""
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        return None, f"cannot be read ({exc.strerror})"
+    if len(data) < _SEAL.size:
+        return None, f"is truncated ({len(data)} bytes)"
+    magic, digest, length, _ = _SEAL.unpack(data[-_SEAL.size:])
+    if magic != SEAL_MAGIC:
+        return None, "has no seal of this version (written by another version, or truncated)"
+    payload = data[:-_SEAL.size]
+    if length != len(payload):
+        return None, f"is truncated or padded ({len(payload)} payload bytes, sealed {length})"
+    if digest != _digest(payload, path.name):
+        return None, "fails its checksum (damaged, or renamed from another entry)"
+    return payload, None
+
+
+def report(message: str) -> None:
+    """Print one line about the cache on stderr (``arches-render: cache: MESSAGE``)."""
+    print(f"arches-render: cache: {message}", file=sys.stderr, flush=True)
+
+
+@contextlib.contextmanager
+def _locked(path: Path):
+    """Hold an exclusive lock for building entry ``path`` (no lock where the folder cannot be written)."""
+    if fcntl is None:
+        yield
+        return
+    try:
+        _make_folder(path.parent)
+        fd = os.open(path.parent / f".{path.name}.lock", os.O_RDWR | os.O_CREAT, 0o666)
+    except OSError:
+        yield  # a read-only cache: no entry will be written, nothing to guard
+        return
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)  # closing drops the lock
+
+
+def _load(path: Path, load):
+    payload, why = _unseal(path)
+    if payload is None:
+        return None, why
+    f = io.BytesIO(payload)
+    f.name = str(path)
+    try:
+        return load(f), None
+    except Exception as exc:  # the loader's refusal of a sealed payload: an older format
+        text = str(exc).strip().splitlines()
+        return None, f"cannot be loaded ({type(exc).__name__}: {text[0] if text else ''})"
+
+
 def load_or_build(path, load, build, save):
     """The entry at ``path``: read with ``load``, or made with ``build`` and stored with ``save``.
 
@@ -105,29 +198,42 @@ def load_or_build(path, load, build, save):
     path : str or Path
         The entry's file (usually ``cache_dir(kind) / f"...-{key}.npz"``).
     load : callable
-        ``load(path) -> value``; raises ``ValueError`` (or ``OSError``) for a file it
-        cannot use, which is then rebuilt.
+        ``load(file) -> value``, ``file`` a binary file object holding the payload
+        (its ``name`` is the entry's path); raises for a payload it cannot use,
+        which is then rebuilt.
     build : callable
         ``build() -> value``.
     save : callable
-        ``save(value, path)``, writing to a temporary path renamed into place.
+        ``save(value, path)``, writing the payload to ``path`` (a temporary file
+        that is then sealed and renamed into place).
 
     Returns
     -------
     (value, str)
         The value and where it came from: ``'disk'`` or ``'built'``.
+
+    Notes
+    -----
+    A damaged entry is reported in one line on stderr (:func:`report`) and rebuilt.
     """
     path = Path(path)
     if path.is_file():
+        value, why = _load(path, load)
+        if why is None:
+            return value, "disk"
+    with _locked(path):
+        # Another process may have built the entry while this one waited for the lock.
+        if path.is_file():
+            value, why = _load(path, load)
+            if why is None:
+                return value, "disk"
+            report(f"{path} {why}: rebuilding it")
+        value = build()
         try:
-            return load(path), "disk"
-        except (OSError, ValueError):
-            pass  # damaged, foreign or stale: rebuild over it
-    value = build()
-    try:
-        _make_folder(path.parent)
-        with atomic_path(path) as tmp:
-            save(value, tmp)
-    except OSError:
-        pass  # a read-only cache only costs time
+            _make_folder(path.parent)
+            with atomic_path(path) as tmp:
+                save(value, tmp)
+                _seal_file(Path(tmp), path.name)
+        except OSError:
+            pass  # a read-only cache only costs time
     return value, "built"

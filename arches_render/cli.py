@@ -3,8 +3,10 @@
 The CLI is thin: this module is the parser and :func:`main`. Each subcommand is a
 module with ``register(subparsers)``: the core ones in :mod:`arches_render.commands`,
 a generator's in its package, listed by the registry (:mod:`arches_render.extensions`).
-Bad input (scene files, arguments) exits with status 2 and one line naming the
-file, key and allowed range; no traceback reaches the user for an error of theirs.
+Bad input (scene files, arguments, requests that do not fit in memory) exits with
+status 2 and one line naming the file, key and allowed range; an output that cannot
+be written (read-only folder, full disk) exits with status 1 and one line naming
+it. No traceback reaches the user for an error of theirs or of their machine.
 """
 
 from __future__ import annotations
@@ -14,8 +16,10 @@ import sys
 
 from . import __version__, extensions
 from .backend import BackendError, set_variant
+from .atomic import OutputError
 from .commands import UsageError, info, mesh, render, turntable
-from .scene import SceneError
+from .resources import ResourceError
+from .scene import SceneError, paths
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
 
@@ -38,10 +42,14 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     try:
         set_variant()
-        return args.func(args)
-    except (SceneError, UsageError) as exc:
+        with paths.allowed(getattr(args, "allow_path", None) or ()):
+            return args.func(args)
+    except (SceneError, UsageError, ResourceError) as exc:
         print(f"arches-render: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    except OutputError as exc:
+        print(f"arches-render: error: {exc}", file=sys.stderr)
+        return EXIT_FAILURE
     except BackendError as exc:
         print(f"arches-render: error: {exc}", file=sys.stderr)
         return EXIT_FAILURE

@@ -59,6 +59,7 @@ def test_cli_saves_the_edited_stacks(tmp_path):
     scene = tmp_path / "s.toml"
     scene.write_text(SCENE)
     out = tmp_path / "out" / "land.npz"
+    out.parent.mkdir()  # an explicit -o needs its folder
     r = run_cli("layers", scene, "-o", out, "-q")
     assert r.returncode == 0, r.stderr
     assert "wrote" in r.stdout and "Traceback" not in r.stderr

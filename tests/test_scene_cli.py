@@ -100,6 +100,7 @@ def test_render_writes_exr_and_png_with_header(tmp_path):
     from arches_render.imaging.exr import read_exr
     path = write_scene(tmp_path, MINIMAL)
     out = tmp_path / "renders" / "mini.exr"
+    out.parent.mkdir()  # an explicit -o needs its folder (only the default out/ is created)
     res = run_cli("render", path, "-o", out, "--spp", "3", "--seed", "5", "--resolution", "20x12")
     assert res.returncode == 0, res.stderr
     assert "render mini" in res.stderr  # progress over sample passes

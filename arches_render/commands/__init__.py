@@ -18,11 +18,15 @@ API, :mod:`arches_render.scene`); it imports no command module itself.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
+import numpy as np
 from tqdm import tqdm
 
+from ..atomic import check_writable
+from ..resources import BASE_BYTES, check_memory, polygonize_bytes, render_bytes
 from ..scene import SceneError
 from ..scene.validate import Table
 
@@ -68,6 +72,19 @@ def positive_float(name):
     return parse
 
 
+def scene_argument(parser, help: str = "scene file (.toml)") -> None:
+    """Add the ``scene`` positional and ``--allow-path DIR`` (repeatable) to a command that reads scenes.
+
+    A scene may read files only inside its own folder and the folders allowed here
+    or in ``$ARCHES_RENDER_PATH`` (:mod:`arches_render.scene.paths`); the CLI applies
+    ``--allow-path`` before the command runs.
+    """
+    parser.add_argument("scene", help=help)
+    parser.add_argument("--allow-path", action="append", default=[], metavar="DIR",
+                        help="let the scene read files under DIR too (repeatable; also $ARCHES_RENDER_PATH, "
+                             "folders separated by ':'); by default a scene reads only inside its own folder")
+
+
 class Progress:
     """A ``progress(done, total)`` callback drawing a tqdm bar on stderr."""
 
@@ -96,6 +113,69 @@ def output_file(text: str, suffix: str) -> Path:
     if out.suffix.lower() != suffix:
         raise UsageError(f"-o/--output must end in {suffix} (got {out})")
     return out
+
+
+def writable_output(out: Path, folder: bool = False, create: bool = False) -> Path:
+    """Check, before any work, that output ``out`` can be written; return it.
+
+    Parameters
+    ----------
+    out : Path
+        The output file, or with ``folder`` the output folder (turntable frames).
+    folder : bool
+        ``out`` is a folder: it is created if missing (its parent must exist).
+    create : bool
+        Create the missing parent folders too (the default ``out/`` of ``render``).
+
+    Raises
+    ------
+    UsageError
+        ``-o/--output OUT: folder F does not exist`` or ``... is not writable (reason)``.
+    """
+    where = out if folder else out.parent
+    try:
+        if create:
+            where.mkdir(parents=True, exist_ok=True)
+        elif folder and not where.exists() and where.parent.is_dir():
+            where.mkdir()
+    except OSError as exc:
+        raise UsageError(f"-o/--output {out}: cannot create folder {where} ({exc.strerror})") from None
+    if not where.is_dir():
+        raise UsageError(f"-o/--output {out}: folder {where} does not exist" if not where.exists()
+                         else f"-o/--output {out}: {where} is not a folder")
+    try:
+        check_writable(where)
+    except OSError as exc:
+        raise UsageError(f"-o/--output {out}: folder {where} is not writable "
+                         f"({os.strerror(exc.errno) if exc.errno else exc})") from None
+    return out
+
+
+def check_render_memory(desc, width: int, height: int, aovs: bool, geometry: str, voxel=None) -> None:
+    """Refuse, before any work, a render whose memory estimate exceeds the machine's.
+
+    The image (:func:`arches_render.resources.render_bytes`: beauty, weight and, with
+    ``aovs``, the AOV channels) and in mesh mode the marching-cubes
+    grid of the field (:func:`arches_render.resources.polygonize_bytes`). The sample
+    count costs time, not memory (the kernels draw samples inside their loop).
+
+    Raises
+    ------
+    arches_render.resources.ResourceError
+    """
+    channels = 4  # beauty and the film's weight
+    if aovs:  # the base layers, one per layer of the field's material, the atmosphere's
+        mat = desc.materials.get(desc.field_material or "", {}) if desc.field is not None else {}
+        channels += 12 + int(mat.get("layer_count", 0)) + (6 if desc.atmosphere is not None else 0)
+    need = render_bytes(width, height, channels)
+    what = [f"rendering {width}x{height} with {channels} film channels"] if width * height else []
+    if geometry == "mesh" and desc.field is not None:
+        lo, hi = (np.asarray(b, np.float64) for b in desc.field.bounds())
+        v = float(voxel or desc.render.voxel or np.max(hi - lo) / 256)
+        voxels = float(np.prod(np.ceil((hi - lo + 2 * v) / v) + 1))
+        need += polygonize_bytes(voxels) - BASE_BYTES
+        what.append(f"polygonizing {voxels:.3g} voxels of {v:g} m")
+    check_memory(need, " and ".join(what))
 
 
 def find_node(data: dict, file, kind: str, name: str | None = None) -> tuple[str, Table]:

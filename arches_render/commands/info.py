@@ -5,11 +5,12 @@ from __future__ import annotations
 from collections import Counter
 
 from ..scene import load_scene
+from . import scene_argument
 
 
 def register(subparsers) -> None:
     i = subparsers.add_parser("info", help="print the scene's field: node count, bounds, memory")
-    i.add_argument("scene", help="scene file (.toml)")
+    scene_argument(i)
     i.set_defaults(func=run)
 
 

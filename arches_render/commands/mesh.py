@@ -19,14 +19,15 @@ from ..mesh.usd_export import write_usd_stage
 from ..mesh.uv_atlas import uv_atlas
 from ..render.renderer import load_materials
 from ..scene import load_scene
-from . import Progress, UsageError, bounded_int, positive_float
+from . import (Progress, UsageError, bounded_int, check_render_memory, positive_float, scene_argument,
+               writable_output)
 
 MESH_FORMATS = (".ply", ".obj", ".glb", ".usd", ".usda", ".usdc")
 
 
 def register(subparsers) -> None:
     m = subparsers.add_parser("mesh", help="polygonize the scene's field (marching cubes)")
-    m.add_argument("scene", help="scene file (.toml)")
+    scene_argument(m)
     m.add_argument("-o", "--output", required=True,
                    help="output mesh (.ply, .obj, .glb) or USD stage (.usd, .usda, .usdc: terrain chunks, "
                         "mesh instances as point instancers, materials)")
@@ -51,7 +52,8 @@ def run(args) -> int:
     if suffix not in MESH_FORMATS:
         raise UsageError(f"-o/--output must end in .ply, .obj or .glb (a mesh) or .usd, .usda or .usdc "
                          f"(a USD stage) (got {out})")
-    out.parent.mkdir(parents=True, exist_ok=True)
+    writable_output(out)
+    check_render_memory(desc, 0, 0, False, "mesh", args.voxel)
     uv = args.uv or args.bake
     voxel = args.voxel or desc.render.voxel or None
     bsdf = None

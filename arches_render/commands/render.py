@@ -20,12 +20,13 @@ from ..render.jobs import RenderJob, prime_cache, run_job
 from ..render.output import render_header, write_render
 from ..render.renderer import build_scene
 from ..scene import load_scene
-from . import Progress, UsageError, bounded_int, output_file, positive_float, resolution
+from . import (Progress, UsageError, bounded_int, check_render_memory, output_file, positive_float,
+               resolution, scene_argument, writable_output)
 
 
 def register(subparsers) -> None:
     r = subparsers.add_parser("render", help="render a scene to an EXR (beauty + AOV layers) and a PNG preview")
-    r.add_argument("scene", help="scene file (.toml)")
+    scene_argument(r)
     r.add_argument("-o", "--output", help="output EXR (default out/SCENE.exr); the PNG goes beside it")
     r.add_argument("--spp", type=bounded_int("--spp", 1, 1 << 20), help="samples per pixel")
     r.add_argument("--resolution", type=resolution, help="WxH, e.g. 640x360")
@@ -52,13 +53,13 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
+    out = output_file(args.output, ".exr") if args.output else Path("out") / f"{Path(args.scene).stem}.exr"
+    writable_output(out, create=args.output is None)
     desc = load_scene(args.scene)
     cam = desc.select_camera(args.camera)
-    out = output_file(args.output, ".exr") if args.output else Path("out") / f"{Path(args.scene).stem}.exr"
     view = args.view or "srgb"
     if view not in VIEWS:
         raise UsageError(f"--view must be one of {', '.join(VIEWS)} (got {view!r})")
-    out.parent.mkdir(parents=True, exist_ok=True)
     s = desc.render
     spp = args.spp or s.spp
     seed = s.seed if args.seed is None else args.seed
@@ -68,6 +69,7 @@ def run(args) -> int:
     tiles = args.tiles or (0 if not (args.scheduler or args.workers) else 4)
     if tiles and geometry == "mesh":
         raise UsageError("--tiles/--workers/--scheduler render the field; drop --geometry mesh")
+    check_render_memory(desc, width, height, aovs, geometry, args.voxel)
 
     t0 = time.perf_counter()
     job = RenderJob(scene=str(Path(args.scene).resolve()), width=width, height=height, spp=spp, seed=seed,

@@ -23,12 +23,13 @@ from ..imaging.video import write_mp4
 from ..render.distributed import dask_client
 from ..render.turntable import plan_turntable, render_turntable
 from ..scene import load_scene
-from . import Progress, UsageError, bounded_int, resolution
+from . import (Progress, UsageError, bounded_int, check_render_memory, resolution, scene_argument,
+               writable_output)
 
 
 def register(subparsers) -> None:
     t = subparsers.add_parser("turntable", help="render a seamless orbit of EXR frames (and an MP4)")
-    t.add_argument("scene", help="scene file (.toml)")
+    scene_argument(t)
     t.add_argument("-o", "--output", required=True, help="output folder of the frames")
     t.add_argument("--frames", type=bounded_int("--frames", 1, 100000), default=48,
                    help="frames per revolution (default 48)")
@@ -60,10 +61,11 @@ def run(args) -> int:
     out = Path(args.output)
     if out.suffix.lower() in (".exr", ".mp4", ".png"):
         raise UsageError(f"-o/--output is a folder for the frames (got {out})")
-    out.mkdir(parents=True, exist_ok=True)
     s = desc.render
     width, height = args.resolution or (s.width, s.height)
     spp = args.spp or s.spp
+    check_render_memory(desc, width, height, args.aovs or args.denoise, "field")
+    writable_output(out, folder=True)  # last check: it creates the folder
     plan = plan_turntable(desc, args.scene, out, args.frames, spp, width, height, args.seed,
                           args.passes or s.passes, aovs=args.aovs, denoise=args.denoise)
     skipped = args.frames - len(plan.todo)

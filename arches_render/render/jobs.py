@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import os
 from collections import OrderedDict
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field as dc_field, replace
 from pathlib import Path
 
 import drjit as dr
@@ -23,7 +23,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..backend import set_variant
-from ..scene import load_scene
+from ..scene import load_scene, paths
 from .renderer import build_scene, render_layers, set_pixel_spread
 
 __all__ = ["RenderJob", "run_job", "clear_cache"]
@@ -59,6 +59,9 @@ class RenderJob:
         Mesh-mode voxel (0: the scene's).
     threads : int
         Dr.Jit worker threads (0: leave as is).
+    allow : tuple of str
+        Folders the scene may read files from besides its own
+        (:mod:`arches_render.scene.paths`); default those allowed where the job is made.
     """
 
     scene: str
@@ -74,6 +77,7 @@ class RenderJob:
     crop: tuple | None = None
     voxel: float = 0.0
     threads: int = 0
+    allow: tuple = dc_field(default_factory=paths.extra_folders)
 
     def with_(self, **changes) -> "RenderJob":
         """A copy with some fields changed."""
@@ -91,7 +95,8 @@ def _scene_for(job: RenderJob):
     if key in _CACHE:
         _CACHE.move_to_end(key)
         return _CACHE[key]
-    desc = load_scene(path)
+    with paths.allowed(job.allow):
+        desc = load_scene(path)
     scene = build_scene(desc, job.geometry, job.width, job.height, job.voxel or None, aovs=job.aovs,
                         crop=job.crop)
     _CACHE[key] = (desc, scene)
@@ -108,7 +113,7 @@ def prime_cache(job: RenderJob, desc, scene) -> None:
 def _key(job: RenderJob) -> tuple:
     path = Path(job.scene).resolve()
     return (str(path), os.stat(path).st_mtime_ns, job.width, job.height, job.geometry, job.aovs,
-            job.crop, job.voxel)
+            job.crop, job.voxel, job.allow)
 
 
 def set_camera(scene, origin, target, up, fov) -> None:

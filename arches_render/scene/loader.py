@@ -59,7 +59,10 @@ from ..field.node import finite_box
 from ..materials import presets
 from .errors import SceneError
 from .material_keys import parse_look, parse_masks
+from .mesh_files import read_mesh
 from .nodes import NodeBuilder
+from .paths import scene_file
+from .texture_files import check_texture, layer_textures
 from .validate import Table
 
 GEOMETRY_MODES = ("field", "mesh")
@@ -207,9 +210,8 @@ def _light(t: Table, base_dir: Path) -> dict:
     elif kind == "constant":
         d = {"type": "constant", "radiance": _rgb(t, "radiance", 1.0)}
     else:
-        path = base_dir / t.string("file")
-        if not path.is_file():
-            raise t.error("file", f"no such file: {path}")
+        path = scene_file(t, "file", base_dir=base_dir, what="environment map")
+        check_texture(path, t, "file", colour=True)
         # Mitsuba's envmaps are Y-up; our world is Z-up.
         d = {"type": "envmap", "filename": str(path), "scale": t.number("scale", 1.0, lo=0.0),
              "to_world": mi.ScalarTransform4f().rotate([0, 0, 1], t.number("rotation", 0.0))
@@ -250,8 +252,11 @@ def _material(t: Table, builder) -> tuple[dict, list, dict]:
         if not isinstance(over, dict):
             raise t.error("overrides", "must be a table")
         try:
+            over = layer_textures(t, name, over, builder.base_dir)
             d = presets.preset_dict(name, over)
             layers, _ = presets.preset_layers(name, over)
+        except SceneError:
+            raise
         except ValueError as exc:
             raise t.error("overrides" if over else "preset", str(exc)) from None
         names = [layer.name for layer in layers]
@@ -263,11 +268,8 @@ def _material(t: Table, builder) -> tuple[dict, list, dict]:
 
 def _mesh(t: Table, base_dir: Path, materials: dict) -> dict:
     if t.has("file"):
-        path = base_dir / t.string("file")
-        if path.suffix.lower() not in (".ply", ".obj"):
-            raise t.error("file", f"must be a .ply or .obj mesh (got {path.name})")
-        if not path.is_file():
-            raise t.error("file", f"no such file: {path}")
+        path = scene_file(t, "file", (".ply", ".obj"), base_dir, what="mesh")
+        read_mesh(path, t, "file")  # Mitsuba reads it again: refuse here what it would fail on
         d = {"type": path.suffix.lower()[1:], "filename": str(path)}
     else:
         d = {"type": t.string("shape", choices={"rectangle", "disk", "sphere", "cube"})}

@@ -46,7 +46,10 @@ import numpy as np
 
 from .. import extensions, field as F
 from ..field.heightmaps import DEMError, fbm_heightmap, read_dem
+from ..resources import ResourceError, check_memory, heightmap_bytes
+from .array_files import Spec, read_arrays
 from .errors import SceneError
+from .paths import scene_file
 from .validate import Table
 
 
@@ -70,7 +73,7 @@ def load_heights(t: Table, base_dir: Path) -> np.ndarray:
     formats, no-data filling, size limits).
     """
     try:
-        H = read_dem(base_dir / t.string("file"), max_samples=8192 * 8192).heights
+        H = read_dem(scene_file(t, "file", base_dir=base_dir, what="DEM"), max_samples=8192 * 8192).heights
     except DEMError as exc:
         raise t.error("file", str(exc)) from None
     return H * t.number("height_scale", 1.0) + t.number("height_offset", 0.0)
@@ -90,6 +93,10 @@ def heightfield_node(t: Table, ctx):
         if (not isinstance(res, list) or len(res) != 2
                 or not all(isinstance(v, int) and 2 <= v <= 8192 for v in res)):
             raise t.error("resolution", f"must be [nx, ny] with integers in [2, 8192] (got {res!r})")
+        try:
+            check_memory(heightmap_bytes(*res), f"the {res[0]}x{res[1]} fBm heightmap")
+        except ResourceError as exc:
+            raise t.error("resolution", str(exc)) from None
         H = fbm_heightmap((x0, y0, x1, y1), res, ridged=t.boolean("ridged", False),
                           power=t.number("power", 1.0, lo=0.1, hi=8.0),
                           offset=t.number("offset", 0.0),
@@ -111,14 +118,20 @@ def child(t: Table, ctx):
     return ctx.build(t.raw("child"), t, "child")
 
 
+#: The arrays of a ``capsule_set`` file.
+CAPSULE_SPECS = {"a": Spec(("n", 3)), "b": Spec(("n", 3), required=False),
+                 "radius": Spec(("n",), scalar=True, lo=0.0, lo_open=True)}
+
+
 def _capsule_set(t: Table, ctx):
     if t.has("file"):
-        path = ctx.base_dir / t.string("file")
+        path = scene_file(t, "file", (".npz",), ctx.base_dir, what="capsule file")
         try:
-            data = np.load(path, allow_pickle=False)
-            a, b, r = data["a"], data["b"], data["radius"]
-        except Exception as exc:
-            raise t.error("file", f"cannot read arrays a, b, radius from {path}: {exc}") from None
+            data = read_arrays(path, CAPSULE_SPECS, "capsule arrays")
+        except ValueError as exc:
+            raise t.error("file", f"cannot read arrays a, b, radius from {path.name}: {exc}") from None
+        a, r = data["a"], data["radius"]
+        b = data.get("b", a)
     else:
         a = np.asarray(t.raw("a"), dtype=np.float64)
         b = np.asarray(t.raw("b", t.data.get("a")), dtype=np.float64)

@@ -13,7 +13,7 @@ import time
 from pathlib import Path
 
 from arches_render.cache import cache_dir
-from arches_render.commands import Progress, UsageError, find_node, output_file
+from arches_render.commands import Progress, UsageError, find_node, output_file, scene_argument, writable_output
 from arches_render.scene import read_toml
 
 from .scene_nodes import tile_params
@@ -22,7 +22,7 @@ from .tile_cache import cached_tile, save_tile
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("blocks", help="build and cache the block tile of a scene's blocks node")
-    p.add_argument("scene", help="scene file (.toml)")
+    scene_argument(p)
     p.add_argument("-o", "--output", required=True, help="output tile file (.npz)")
     p.add_argument("--node", default=None, help="name of the blocks node under [nodes] (when the scene has several)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
@@ -30,7 +30,7 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    out = output_file(args.output, ".npz")
+    out = writable_output(output_file(args.output, ".npz"))
     scene = Path(args.scene)
     name, table = find_node(read_toml(scene), scene, "blocks", args.node)
     if table.has("tile"):
@@ -40,7 +40,6 @@ def run(args) -> int:
     bar = Progress("block tile", "stage", args.quiet)
     tile = cached_tile(params, progress=bar)
     bar.close()
-    out.parent.mkdir(parents=True, exist_ok=True)
     save_tile(tile, out)
     st = tile.stats
     print(f"wrote {out} ({params.structure}: {tile.n_blocks} blocks from {st['points']} samples and "

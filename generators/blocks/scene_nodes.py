@@ -42,6 +42,7 @@ import math
 import numpy as np
 
 from arches_render.field.node import finite_box
+from arches_render.scene.paths import scene_file
 
 from .fracture_discs import STRUCTURES
 from .replication import replicate
@@ -76,7 +77,7 @@ def tile_params(t):
 def tile_from_table(t, base_dir, progress=None):
     """The tile of a ``blocks`` table: its ``tile`` file, or built from its keys (cached)."""
     if t.has("tile"):
-        path = base_dir / t.string("tile")
+        path = scene_file(t, "tile", (".npz",), base_dir, what="block tile")
         for key in TILE_KEYS:
             if key != "seed" and t.has(key):
                 raise t.error(key, "cannot be combined with 'tile' (the file fixes the tile)")

@@ -25,7 +25,6 @@ Paris et al. (2020), sections 4 and 6 (Tables 1 and 2).
 from __future__ import annotations
 
 import json
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -33,6 +32,8 @@ import numpy as np
 
 from arches_render import cache
 from arches_render.atomic import atomic_path
+from arches_render.npzfile import write_npz
+from arches_render.scene.array_files import Spec, read_arrays
 
 from .block_hulls import block_anchors, hull_planes
 from .fracture_discs import STRUCTURES, fracture_discs
@@ -161,7 +162,6 @@ def build_tile(params: TileParams, progress=None) -> BlockTile:
     """
     params.validate()
     step = progress or (lambda d, t: None)
-    t0 = time.perf_counter()
     s, r = float(params.size), params.radius()
     pts = poisson_disc_periodic(s, r, seed=params.seed)
     step(1, 4)
@@ -212,7 +212,7 @@ def build_tile(params: TileParams, progress=None) -> BlockTile:
                  mean_points_per_block=float(np.mean(sizes)),
                  samples_in_blocks=float(np.sum(sizes) / len(pts)),
                  mean_planes_per_block=float(n_planes / len(start)), dilation=dilation,
-                 seconds=time.perf_counter() - t0, **gstats)
+                 **gstats)
     return BlockTile(size=s, normals=np.concatenate(normals).astype(np.float32),
                      offsets=np.concatenate(offsets).astype(np.float32),
                      start=np.asarray(start, np.uint32), count=np.asarray(count, np.uint32),
@@ -226,22 +226,40 @@ def save_tile(tile: BlockTile, path) -> None:
                        "stats": tile.stats}, default=list)
     with atomic_path(Path(path)) as tmp:
         with open(tmp, "wb") as fh:
-            np.savez_compressed(fh, normals=tile.normals, offsets=tile.offsets, start=tile.start,
-                                count=tile.count, anchors=tile.anchors, centroid=tile.centroid,
-                                meta=np.array(meta))
+            write_npz(fh, dict(normals=tile.normals, offsets=tile.offsets, start=tile.start,
+                               count=tile.count, anchors=tile.anchors, centroid=tile.centroid,
+                               meta=np.array(meta)), compress=True)
+
+
+#: The arrays of a tile file (:func:`arches_render.scene.array_files.read_arrays` schema).
+TILE_SPECS = {"normals": Spec(("p", 3)), "offsets": Spec(("p",)), "start": Spec(("b",), "integer", lo=0),
+              "count": Spec(("b",), "integer", lo=1), "anchors": Spec(("b", None, 3)),
+              "centroid": Spec(("b", 3)), "meta": Spec((), "string")}
 
 
 def load_tile(path) -> BlockTile:
-    """Read a tile written by :func:`save_tile` (``ValueError`` if it is not one)."""
+    """Read a tile written by :func:`save_tile` (``ValueError`` if it is not one).
+
+    The arrays are checked before use (shapes, finite values, plane ranges inside
+    the plane arrays): the field gathers planes by ``start``/``count``, and an index
+    outside the arrays would read out of bounds.
+    """
     try:
-        with np.load(path, allow_pickle=False) as z:
-            meta = json.loads(str(z["meta"]))
-            if meta.get("version") != FORMAT_VERSION:
-                raise ValueError(f"tile format {meta.get('version')} (expected {FORMAT_VERSION})")
-            arrays = {k: z[k] for k in ("normals", "offsets", "start", "count", "anchors", "centroid")}
-    except (OSError, KeyError, ValueError, json.JSONDecodeError) as exc:
-        raise ValueError(f"{path}: not a block tile ({exc})") from None
-    return BlockTile(size=float(meta["size"]), params=meta["params"], stats=meta["stats"], **arrays)
+        z = read_arrays(path, TILE_SPECS, "block tile")
+        meta = json.loads(str(z.pop("meta")))
+        if not isinstance(meta, dict) or meta.get("version") != FORMAT_VERSION:
+            raise ValueError(f"tile format {meta.get('version') if isinstance(meta, dict) else meta!r} "
+                             f"(expected {FORMAT_VERSION})")
+        size = float(meta["size"])
+        if not (np.isfinite(size) and size > 0):
+            raise ValueError(f"tile size must be > 0 (got {size})")
+        if len(z["start"]) == 0 or int((z["start"] + z["count"]).max()) > len(z["normals"]):
+            raise ValueError(f"block plane ranges start + count must lie in [0, {len(z['normals'])}]")
+        params, stats = dict(meta.get("params", {})), dict(meta.get("stats", {}))
+    except (KeyError, TypeError, ValueError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{Path(getattr(path, 'name', None) or str(path)).name}: not a block tile ({exc})") from None
+    return BlockTile(size=size, params=params, stats=stats,
+                     **{k: v.astype(np.uint32 if k in ("start", "count") else np.float32) for k, v in z.items()})
 
 
 def cached_tile(params: TileParams, folder=None, progress=None) -> BlockTile:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from arches_render.commands import Progress, find_node, output_file
+from arches_render.commands import Progress, find_node, output_file, scene_argument, writable_output
 from arches_render.scene import read_toml
 from arches_render.scene.nodes import NodeBuilder
 
@@ -20,7 +20,7 @@ from .scene_nodes import build_stacks
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("layers", help="build a scene's layered terrain and save its material stacks")
-    p.add_argument("scene", help="scene file (.toml) with a node of type layers")
+    scene_argument(p, "scene file (.toml) with a node of type layers")
     p.add_argument("-o", "--output", required=True, help="output .npz of the edited stacks")
     p.add_argument("--node", default=None, help="name of the layers node (when the scene has several)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
@@ -28,7 +28,7 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    out = output_file(args.output, ".npz")
+    out = writable_output(output_file(args.output, ".npz"))
     scene = Path(args.scene)
     data = read_toml(scene)
     name, table = find_node(data, scene, "layers", args.node)
@@ -36,7 +36,6 @@ def run(args) -> int:
     stacks, _ = build_stacks(table, NodeBuilder(data["nodes"], scene, scene.parent, progress=bar))
     table.finish()
     bar.close()
-    out.parent.mkdir(parents=True, exist_ok=True)
     stacks.save(out)
     print(f"wrote {out} ({stacks.nx}x{stacks.ny} stacks, {len(stacks.material)} layers, "
           f"{stacks.nbytes()} bytes, effective {stacks.nx}x{stacks.ny}x{stacks.n_levels} voxels)")

@@ -27,11 +27,15 @@ of terrain erosion. SCCG 2001.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 from numba import njit
 
 from arches_render.atomic import atomic_path
 from arches_render.field import evaluate
+from arches_render.npzfile import write_npz
+from arches_render.scene.array_files import Spec, read_arrays
 
 #: Material ids. Stable materials (bedrock, sandstone, water) never flow; granular
 #: ones (sand, rock) flow by their angle of repose (section 3.4).
@@ -43,6 +47,12 @@ GRANULAR = (SAND, ROCK)
 #: rocks are included because this renderer has no separate rock instancing here).
 SOLID = (BEDROCK, SAND, ROCK, SANDSTONE)
 MAX_LEVELS = 65535
+#: The arrays of a stack file written by :meth:`MaterialStacks.save`.
+STACK_SPECS = {"offsets": Spec(("c",), "integer", lo=0, hi=2 ** 32 - 1),
+               "material": Spec(("m",), "integer", lo=0, hi=255),
+               "count": Spec(("m",), "integer", lo=0, hi=MAX_LEVELS),
+               "grid": Spec((3,), "integer", lo=1, hi=2 ** 31 - 1), "geometry": Spec((5,)),
+               "material_names": Spec((None,), "string", required=False)}
 
 
 def material_id(name) -> int:
@@ -339,22 +349,33 @@ class MaterialStacks:
         """Write the stacks to an ``.npz`` file atomically."""
         with atomic_path(path) as tmp:
             with open(tmp, "wb") as f:
-                np.savez_compressed(
-                    f, offsets=self.offsets, material=self.material, count=self.count,
+                write_npz(f, dict(
+                    offsets=self.offsets, material=self.material, count=self.count,
                     grid=np.array([self.nx, self.ny, self.n_levels], dtype=np.int64),
                     geometry=np.array([self.cell, *self.origin, self.dz], dtype=np.float64),
-                    material_names=np.array([MATERIAL_NAMES[i] for i in sorted(MATERIAL_NAMES)]))
+                    material_names=np.array([MATERIAL_NAMES[i] for i in sorted(MATERIAL_NAMES)])), compress=True)
 
     @classmethod
     def load(cls, path) -> "MaterialStacks":
-        """Read stacks written by :meth:`save` (``ValueError`` on a bad file)."""
+        """Read stacks written by :meth:`save` (``ValueError`` on a bad file).
+
+        The arrays are checked before use (:data:`STACK_SPECS`; offsets rising from 0,
+        known material ids): the compiled stack walkers index without bounds checks.
+        """
         try:
-            with np.load(path, allow_pickle=False) as d:
-                nx, ny, n_levels = (int(v) for v in d["grid"])
-                cell, x0, y0, z0, dz = (float(v) for v in d["geometry"])
-                return cls((ny, nx), cell, (x0, y0, z0), dz, n_levels, d["offsets"], d["material"], d["count"])
+            d = read_arrays(path, STACK_SPECS, "material stacks")
+            nx, ny, n_levels = (int(v) for v in d["grid"])
+            cell, x0, y0, z0, dz = (float(v) for v in d["geometry"])
+            off = d["offsets"]
+            if nx * ny + 1 != len(off) or off[0] != 0 or np.any(np.diff(off) < 0) or off[-1] != len(d["material"]):
+                raise ValueError(f"offsets must rise from 0 to len(material) over nx ny + 1 = {nx * ny + 1} "
+                                 f"entries (grid {nx}x{ny})")
+            unknown = np.setdiff1d(d["material"], list(MATERIAL_NAMES))
+            if unknown.size:
+                raise ValueError(f"unknown material id {int(unknown[0])} (allowed: {sorted(MATERIAL_NAMES)})")
+            return cls((ny, nx), cell, (x0, y0, z0), dz, n_levels, off, d["material"], d["count"])
         except (OSError, KeyError, ValueError) as exc:
-            raise ValueError(f"cannot read material stacks from {path}: {exc}") from None
+            raise ValueError(f"cannot read material stacks from {Path(path).name}: {exc}") from None
 
     # ------------------------------------------------------------------ editing
     def rewrite(self, cols, lev0, block) -> "MaterialStacks":

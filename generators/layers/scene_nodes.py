@@ -41,6 +41,8 @@ import numpy as np
 from arches_render.field import Heightfield
 from arches_render.scene.errors import SceneError
 from arches_render.scene.nodes import load_heights
+from arches_render.resources import ResourceError, check_memory, heightmap_bytes
+from arches_render.scene.paths import scene_file
 from arches_render.scene.validate import Table
 
 from .convolution_surface import ConvolutionSurface, MaterialRatio
@@ -65,6 +67,10 @@ def _grid(t: Table, extent, cell):
     nx, ny = int(round(nx)), int(round(ny))
     if not (2 <= nx <= 8192 and 2 <= ny <= 8192):
         raise t.error("cell", f"must give between 2 and 8192 columns per axis (got {nx} x {ny})")
+    try:  # the column heights and their stacks: the memory of a heightmap of the grid
+        check_memory(heightmap_bytes(nx, ny), f"a {nx}x{ny} grid of material stacks")
+    except ResourceError as exc:
+        raise t.error("cell", str(exc)) from None
     return nx, ny
 
 
@@ -112,7 +118,7 @@ def _from_heights(t: Table, H, extent, cell, column):
 def _source(t: Table, ctx) -> MaterialStacks:
     kind = t.string("source", "flat", choices={"flat", "file", "node", "stacks"})
     if kind == "stacks":
-        path = ctx.base_dir / t.string("file")
+        path = scene_file(t, "file", (".npz",), ctx.base_dir, what="stack file")
         try:
             return MaterialStacks.load(path)
         except ValueError as exc:

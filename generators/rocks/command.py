@@ -11,7 +11,7 @@ from __future__ import annotations
 import time
 
 from arches_render.atomic import atomic_path
-from arches_render.commands import Progress, UsageError, bounded_int, output_file
+from arches_render.commands import Progress, UsageError, bounded_int, output_file, scene_argument, writable_output
 from arches_render.scene import load_scene
 
 from .tile_cache import cache_key, load_or_build
@@ -19,7 +19,7 @@ from .tile_cache import cache_key, load_or_build
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("rocks", help="build and cache the rock tiles of a scene's [[rock_piles]]")
-    p.add_argument("scene", help="scene file (.toml)")
+    scene_argument(p)
     p.add_argument("-o", "--output", required=True, help="output tile file (.npz)")
     p.add_argument("--pile", type=bounded_int("--pile", 0, 1023), default=0,
                    help="index of the [[rock_piles]] entry (default 0)")
@@ -30,7 +30,7 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    out = output_file(args.output, ".npz")
+    out = writable_output(output_file(args.output, ".npz"))
     desc = load_scene(args.scene)
     piles = desc.rock_piles
     if not piles:
@@ -43,7 +43,6 @@ def run(args) -> int:
     store, source = load_or_build(pile.params, progress=bar, workers=args.workers)
     bar.close()
     elapsed = time.perf_counter() - t0
-    out.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(out) as tmp:
         with open(tmp, "wb") as f:
             store.save(f)

@@ -17,15 +17,20 @@ sphere about the seed, the "Voronoi embedding sphere"), ``uid``, ``slot``;
 from __future__ import annotations
 
 import json
+import zipfile
 from dataclasses import dataclass
 
 import numpy as np
+
+from arches_render.npzfile import write_npz
 
 __all__ = ["RockStore", "FORMAT"]
 
 FORMAT = "arches-rock-tiles/1"
 _ARRAYS = ("vertices", "normals", "faces", "vstart", "fstart", "seed", "radius", "uid", "slot",
            "anchors", "slot_start")
+# Meta entries that measure a build rather than describe the tiles (not written to files).
+_TIMINGS = ("build_seconds", "worker_cpu_seconds")
 
 
 @dataclass
@@ -82,9 +87,13 @@ class RockStore:
                    meta=dict(meta, format=FORMAT, rocks=len(rocks), triangles=int(nf.sum())))
 
     def save(self, path) -> None:
-        """Write an uncompressed ``.npz`` (fast to load) to an open file or path."""
-        np.savez(path, meta=np.array(json.dumps(self.meta)),
-                 **{k: getattr(self, k) for k in _ARRAYS})
+        """Write an uncompressed ``.npz`` (fast to load) to an open file or path.
+
+        The same tiles give the same bytes (:func:`arches_render.npzfile.write_npz`);
+        the build's timings stay in memory only, since they differ run to run.
+        """
+        meta = {k: v for k, v in self.meta.items() if k not in _TIMINGS}
+        write_npz(path, {"meta": np.array(json.dumps(meta)), **{k: getattr(self, k) for k in _ARRAYS}})
 
     @classmethod
     def load(cls, path) -> "RockStore":
@@ -99,8 +108,8 @@ class RockStore:
             with np.load(path, allow_pickle=False) as z:
                 meta = json.loads(str(z["meta"]))
                 arrays = {k: z[k] for k in _ARRAYS}
-        except (OSError, KeyError, ValueError) as exc:
-            raise ValueError(f"{path}: not a rock tile file ({exc})") from None
+        except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+            raise ValueError(f"{getattr(path, 'name', path)}: not a rock tile file ({exc})") from None
         if meta.get("format") != FORMAT:
             raise ValueError(f"{path}: tile format {meta.get('format')!r}, expected {FORMAT!r}")
         return cls(meta=meta, **arrays)

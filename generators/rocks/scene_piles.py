@@ -47,6 +47,8 @@ import numpy as np
 from arches_render.field.node import finite_box
 from arches_render.materials import presets
 from arches_render.scene.errors import SceneError
+from arches_render.scene.mesh_files import read_mesh
+from arches_render.scene.paths import scene_file
 
 from . import instancing as ins
 from .instancing import instance_buffers
@@ -166,16 +168,8 @@ def _support(t, builder, field_node, base_dir: Path):
                                height=s.number("height", 1.0, lo=0, lo_open=True),
                                thickness=s.number("thickness", 0.25, lo=0, lo_open=True))
     else:
-        import trimesh
-        path = base_dir / s.string("mesh")
-        if path.suffix.lower() not in (".ply", ".obj", ".stl"):
-            raise s.error("mesh", f"must be a .ply, .obj or .stl mesh (got {path.name})")
-        if not path.is_file():
-            raise s.error("mesh", f"no such file: {path}")
-        try:
-            mesh = trimesh.load_mesh(path, process=True)
-        except Exception as exc:  # unreadable file: name it, no traceback
-            raise s.error("mesh", f"cannot read {path}: {exc}") from None
+        path = scene_file(s, "mesh", (".ply", ".obj", ".stl"), base_dir, what="mesh")
+        mesh = read_mesh(path, s, "mesh", closed=True, process=True).mesh
         mesh.apply_scale(s.number("scale", 1.0, lo=0, lo_open=True))
         mesh.apply_translation(s.vector("translate", default=[0.0, 0.0, 0.0]))
         try:

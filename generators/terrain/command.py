@@ -19,14 +19,12 @@ down to it), ``--data-dir`` (relative to the scene's folder), ``-q``.
 from __future__ import annotations
 
 import os
-import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from arches_render.atomic import atomic_write
-from arches_render.commands import Progress, UsageError, bounded_int, positive_float
+from arches_render.atomic import atomic_write, temp_dir
+from arches_render.commands import Progress, UsageError, bounded_int, positive_float, writable_output
 from arches_render.field.heightmaps import DEMError, read_dem
 from arches_render.scene.nodes import NodeBuilder
 
@@ -105,8 +103,7 @@ def run(args) -> int:
     out = Path(args.output)
     if out.suffix.lower() != ".toml":
         raise UsageError(f"-o {out}: the scene file must end in .toml")
-    if not out.parent.is_dir():
-        raise UsageError(f"-o {out}: folder {out.parent} does not exist")
+    writable_output(out)
     data_dir = Path(args.data_dir) if args.data_dir else Path(".")
     if data_dir.is_absolute() or ".." in data_dir.parts:
         raise UsageError(f"--data-dir {args.data_dir}: must be a folder inside the scene's folder")
@@ -127,8 +124,8 @@ def run(args) -> int:
 
     bar = Progress(f"amplify {args.preset}", "step", args.quiet)
     prefix = (data_dir / out.stem).as_posix()
-    work = Path(tempfile.mkdtemp(prefix=f".{out.stem}.amplify-", dir=out.parent))
-    try:
+    # The work folder's name carries this process's id: one left by a kill is swept by the next run.
+    with temp_dir(out.parent, out.stem) as work:
         result = amplify(H, cell, args.preset, args.seed, work, prefix,
                          progress=lambda done, total, label: (bar.bar.set_postfix_str(label), bar(done, total)))
         bar.close()
@@ -144,9 +141,7 @@ def run(args) -> int:
         text = toml_text(_scene_doc(result, out.stem), header)
         with atomic_write(out, "w", encoding="utf-8") as f:
             f.write(text)
-    finally:
-        bar.close()
-        shutil.rmtree(work, ignore_errors=True)
+    bar.close()
     st = result.stats
     if "note" in st:
         print(f"arches-render amplify: {args.dem}: {st['note']}", flush=True)

@@ -43,6 +43,8 @@ from __future__ import annotations
 import numpy as np
 
 from arches_render.scene import nodes as core
+from arches_render.scene.array_files import Spec, read_arrays
+from arches_render.scene.paths import scene_file
 from arches_render.scene.validate import Table
 
 from . import geology as G
@@ -51,25 +53,19 @@ from .implicit_heightfield import ImplicitHeightfield
 from .operators import LocalWarp, Sum
 from .skeletal_set import NPZ_KEYS, SkeletalSet, load_npz
 
+#: The arrays of a ``bumps`` file (centres, radii, heights of the heightfield's bumps).
+BUMP_SPECS = {"center": Spec(("n", 2)), "radius": Spec(("n",), scalar=True, lo=0.0, lo_open=True),
+              "height": Spec(("n",), scalar=True)}
+
 
 def _arrays(t: Table, ctx, names, required, allowed_file_keys=None):
     """Arrays from ``file`` (.npz) or inline keys; errors name the key."""
     if t.has("file"):
-        path = ctx.base_dir / t.string("file")
-        if not path.is_file():
-            raise t.error("file", f"no such file: {path}")
+        path = scene_file(t, "file", (".npz",), ctx.base_dir, what="primitive file")
         try:
-            if allowed_file_keys is None:
-                data = load_npz(path)
-            else:
-                with np.load(path, allow_pickle=False) as z:
-                    data = {k: np.array(z[k]) for k in z.files}
-                missing = [k for k in required if k not in data]
-                extra = sorted(set(data) - set(names))
-                if missing or extra:
-                    raise ValueError(f"needs arrays {', '.join(names)} (missing: {missing}, unknown: {extra})")
-        except Exception as exc:
-            raise t.error("file", f"cannot read primitive arrays from {path}: {exc}") from None
+            data = load_npz(path) if allowed_file_keys is None else read_arrays(path, BUMP_SPECS, "bumps")
+        except ValueError as exc:
+            raise t.error("file", f"cannot read primitive arrays from {path.name}: {exc}") from None
         return data
     data = {}
     for name in names:

@@ -86,14 +86,22 @@ import mitsuba as mi
 import numpy as np
 
 from arches_render.atomic import atomic_write
+from arches_render.npzfile import write_npz
 from arches_render.field.node import Node, box_distance, opaque_float
 from arches_render.field.noise import fbm, fbm_lipschitz, fbm_range
 from arches_render.field.primitive_set import empty_distance, grid_lists
+from arches_render.scene.array_files import Spec, read_arrays
 
 from .falloff import G_SLOPE, g_dr
 
 #: Array names of the ``.npz`` format (``a`` and ``radius`` required).
 NPZ_KEYS = ("a", "b", "radius", "energy", "core", "group")
+#: What each array of a primitive file must be (:func:`arches_render.scene.array_files.read_arrays`).
+NPZ_SPECS = {"a": Spec(("n", 3)), "b": Spec(("n", 3), required=False),
+             "radius": Spec(("n",), scalar=True, lo=0.0, lo_open=True),
+             "energy": Spec(("n",), scalar=True, required=False),
+             "core": Spec(("n",), scalar=True, required=False, lo=0.0),
+             "group": Spec(("n",), required=False, lo=0.0)}
 
 #: Distance bound of an empty level set (finite, so that ``0 * FAR`` stays 0).
 FAR = 1e10
@@ -510,18 +518,11 @@ def save_npz(path, **arrays) -> None:
     if unknown:
         raise ValueError(f"unknown array(s) {sorted(unknown)}; allowed: {', '.join(NPZ_KEYS)}")
     buf = io.BytesIO()
-    np.savez(buf, **{k: np.asarray(v) for k, v in arrays.items() if v is not None})
+    write_npz(buf, {k: np.asarray(v) for k, v in arrays.items() if v is not None})
     with atomic_write(Path(path)) as f:
         f.write(buf.getvalue())
 
 
 def load_npz(path) -> dict:
-    """Read the primitive arrays of ``path`` (keys of ``NPZ_KEYS`` present in it)."""
-    with np.load(path, allow_pickle=False) as data:
-        missing = [k for k in ("a", "radius") if k not in data.files]
-        if missing:
-            raise ValueError(f"missing array(s) {', '.join(missing)} (has: {', '.join(data.files)})")
-        extra = sorted(set(data.files) - set(NPZ_KEYS))
-        if extra:
-            raise ValueError(f"unknown array(s) {', '.join(extra)} (allowed: {', '.join(NPZ_KEYS)})")
-        return {k: np.array(data[k]) for k in data.files}
+    """Read the primitive arrays of ``path`` (keys of ``NPZ_KEYS`` present in it), checked against :data:`NPZ_SPECS`."""
+    return read_arrays(path, NPZ_SPECS, "primitive arrays")
