@@ -13,6 +13,10 @@ and field of view stay those of the scene: one exposure, one speed. Frame ``N``
 ``N`` before the sine and cosine), so the loop has no seam; frame 0 is the scene's
 own camera.
 
+The same frames, resume and layers serve a keyframed camera path
+(:mod:`arches_render.render.camera_path`): :func:`plan_turntable` takes the
+cameras of every frame in place of the orbit.
+
 Frames are ``DIR/NAME.####.exr`` numbered from 1001 (a VFX convention that keeps
 handles free before the first frame), each written atomically with its AOVs and
 header (:mod:`arches_render.render.output`). A rerun skips every frame that is
@@ -89,7 +93,7 @@ class TurntablePlan:
 
 def plan_turntable(desc, scene_file, out_dir, frames: int, spp: int, width: int, height: int,
                    seed: int | None = None, passes: int = 0, aovs: bool = True,
-                   denoise: bool = False, threads: int = 0) -> TurntablePlan:
+                   denoise: bool = False, threads: int = 0, cameras=None) -> TurntablePlan:
     """Jobs of a turntable and the frames still to render.
 
     Parameters
@@ -108,6 +112,10 @@ def plan_turntable(desc, scene_file, out_dir, frames: int, spp: int, width: int,
         Layers the frames hold (denoising needs the AOVs).
     threads : int
         Dr.Jit threads per job (0: default).
+    cameras : list of tuple, optional
+        ``(origin, target, up, fov)`` of every frame (a camera path,
+        :func:`arches_render.render.camera_path.path_cameras`); ``frames`` must be
+        its length. Default: the orbit of the scene's camera.
 
     Returns
     -------
@@ -119,9 +127,14 @@ def plan_turntable(desc, scene_file, out_dir, frames: int, spp: int, width: int,
     layers = tuple(name for name, _ in BASE_LAYERS) if aovs else ()
     if denoise:
         layers += ("denoised",)
+    if cameras is not None and len(cameras) != frames:
+        raise ValueError(f"{len(cameras)} cameras for {frames} frames")
     for k in range(frames):
-        origin = orbit_camera(cam.origin, cam.target, cam.up, k, frames)
-        camera = (tuple(origin.tolist()), tuple(cam.target), tuple(cam.up), cam.fov)
+        if cameras is not None:
+            camera = cameras[k]
+        else:
+            origin = orbit_camera(cam.origin, cam.target, cam.up, k, frames)
+            camera = (tuple(origin.tolist()), tuple(cam.target), tuple(cam.up), cam.fov)
         job = RenderJob(scene=str(Path(scene_file).resolve()), width=width, height=height, spp=spp,
                         seed=seed, passes=passes, stream=k, geometry="field", aovs=aovs or denoise,
                         camera=camera, threads=threads)

@@ -14,13 +14,20 @@ A scene file is data, never code. Top-level tables:
                  scene needs ``[camera]`` or at least one named camera; the first
                  is ``desc.camera`` unless ``select_camera`` picks another
                  (``render``/``turntable --camera NAME``)
+``[camera_path]`` ``keys = [{camera, time}]`` (two or more named cameras, times in
+                 seconds strictly increasing) and ``fps`` (default 24): a C¹ flight
+                 through the cameras (:mod:`arches_render.render.camera_path`),
+                 rendered by ``turntable --path``
 ``[[lights]]``   ``type`` = ``sunsky`` | ``directional`` | ``point`` | ``constant`` | ``envmap``
 ``[materials.NAME]`` ``type = "triplanar"`` with ``preset``, ``overrides``,
                  ``masks = [{layer, [kind], node, lo, hi}]`` (a layer's coverage times
                  ``smoothstep(lo, hi, m)``, ``m`` a field or noise node's value, the
                  cavity or the wetness) and the lookdev keys ``detail``, ``strata``,
-                 ``cavity``, ``wetness`` (:mod:`arches_render.scene.material_keys`), or
-                 ``type = "diffuse"`` with ``color``
+                 ``cavity``, ``wetness`` (:mod:`arches_render.scene.material_keys`),
+                 ``type = "diffuse"`` with ``color``, or ``type = "glossy"`` with
+                 ``color``, ``roughness`` (GGX alpha, default 0.05) and ``ior`` (1.333,
+                 water): a diffuse base under a dielectric coating (Mitsuba's
+                 ``roughplastic``), for water and wet surfaces that mirror the sky
 ``[[meshes]]``   ``file`` (PLY/OBJ) or ``shape`` (rectangle, disk, sphere, cube), a
                  transform (``translate``, ``rotate = {axis, angle}``, ``scale``), ``material``
 ``[field]``      ``root`` (node name or inline table), ``material``
@@ -109,6 +116,14 @@ class Camera:
 
 
 @dataclass
+class CameraPath:
+    """The ``[camera_path]`` table: ``keys`` are ``(time, camera name)``, times increasing."""
+
+    keys: list
+    fps: float = 24.0
+
+
+@dataclass
 class SceneDescription:
     """A validated scene: plain data plus the built field tree."""
 
@@ -127,6 +142,7 @@ class SceneDescription:
     field_material: str | None = None
     tables: dict = dc_field(default_factory=dict)       # generators' [[NAME]] -> parsed items
     atmosphere: AtmosphereSettings | None = None
+    camera_path: CameraPath | None = None
 
     def select_camera(self, name: str | None) -> Camera:
         """Make camera ``name`` (``None``: keep the current one) the scene's camera and return it.
@@ -176,6 +192,28 @@ def _cameras(root: Table) -> dict:
         if not cameras:
             raise root.error("cameras", "holds no camera (add [cameras.NAME] with origin and target)")
     return cameras
+
+
+def _camera_path(t: Table, cameras: dict) -> CameraPath:
+    """Validate ``[camera_path]`` against the scene's cameras (see the module docstring)."""
+    fps = t.number("fps", 24.0, lo=0, hi=1000, lo_open=True)
+    raw = t.raw("keys")
+    if not isinstance(raw, list) or len(raw) < 2 or not all(isinstance(k, dict) for k in raw):
+        raise t.error("keys", "must be a list of two or more {camera, time} tables")
+    keys = []
+    for i, item in enumerate(raw):
+        k = Table(item, t.file, f"{t.key('keys')}[{i}]")
+        name = k.string("camera")
+        if name not in cameras:
+            raise k.error("camera", f"names no camera (cameras: {', '.join(cameras)}; got {name!r})")
+        time = k.number("time", lo=-1e6, hi=1e6)
+        if keys and time <= keys[-1][0]:
+            raise k.error("time", f"must be greater than the previous key's time {keys[-1][0]:g} "
+                                  f"(times strictly increase; got {time:g})")
+        k.finish()
+        keys.append((time, name))
+    t.finish()
+    return CameraPath(keys=keys, fps=fps)
 
 
 def _sun_direction(t: Table):
@@ -242,10 +280,14 @@ def _atmosphere(t: Table, lights: list) -> AtmosphereSettings:
 
 
 def _material(t: Table, builder) -> tuple[dict, list, dict]:
-    kind = t.string("type", "triplanar", choices={"triplanar", "diffuse"})
+    kind = t.string("type", "triplanar", choices={"triplanar", "diffuse", "glossy"})
     masks, nodes = [], {}
     if kind == "diffuse":
         d = {"type": "diffuse", "reflectance": _rgb(t, "color", [0.5, 0.5, 0.5])}
+    elif kind == "glossy":
+        d = {"type": "roughplastic", "diffuse_reflectance": _rgb(t, "color", [0.02, 0.05, 0.06]),
+             "alpha": t.number("roughness", 0.05, lo=0.001, hi=1.0),
+             "int_ior": t.number("ior", 1.333, lo=1.0, hi=3.0), "distribution": "ggx"}
     else:
         name = t.string("preset", "terrain")
         over = t.raw("overrides", {})
@@ -373,6 +415,8 @@ def parse_scene(data: dict, path) -> SceneDescription:
 
     cameras = _cameras(root)
     camera = next(iter(cameras.values()))
+    cp = root.table("camera_path", None)
+    camera_path = _camera_path(cp, cameras) if cp is not None else None
 
     lights = [_light(t, base_dir) for t in root.tables("lights")]
     if not lights:
@@ -426,4 +470,4 @@ def parse_scene(data: dict, path) -> SceneDescription:
                             camera=camera, cameras=cameras, lights=lights, materials=materials,
                             material_masks=material_masks, material_nodes=material_nodes, meshes=meshes,
                             field=field_node, field_material=field_material, tables=tables,
-                            atmosphere=atmosphere)
+                            atmosphere=atmosphere, camera_path=camera_path)
