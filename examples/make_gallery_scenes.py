@@ -1,0 +1,258 @@
+"""Make the gallery scenes ``scenes/gallery/*.toml``: landscapes after the papers' figures.
+
+Each scene is a landscape (a terrain reaching out of frame or into the haze, sky,
+sun and aerial perspective), not an object on a plane. The amplified ones start
+from a synthetic DEM made here (seeded) and run terrain amplification
+(:func:`arches_render.generators.terrain.amplify.amplify`) exactly as
+``arches-render amplify`` does, then get a chosen camera, sun and atmosphere;
+the others are written as TOML from the generators' scene keys.
+
+Run from the repository root::
+
+    python examples/make_gallery_scenes.py [NAME ...]
+
+Data files (heights, primitive arrays, meshes) go to ``scenes/gallery/data/``.
+``examples/make_gallery.py`` renders the scenes into ``docs/gallery/``.
+"""
+
+from __future__ import annotations
+
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from scipy.ndimage import gaussian_filter
+
+import arches_render  # noqa: F401  (chooses the libLLVM before Dr.Jit loads)
+from arches_render.generators.terrain import command as amplify_command
+from arches_render.generators.terrain.amplify import amplify
+from arches_render.generators.terrain.scene_writer import toml_text
+
+REPO = Path(__file__).resolve().parents[1]
+GALLERY = REPO / "scenes" / "gallery"
+DATA = "data"
+
+
+# -- DEM helpers ------------------------------------------------------------------------------
+def smooth(t):
+    """Smoothstep of ``t`` clamped to [0, 1]."""
+    t = np.clip(t, 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+def grid(nx, ny, cell):
+    """Sample coordinates of an ``ny x nx`` DEM centred on the origin."""
+    x = (np.arange(nx) - (nx - 1) / 2) * cell
+    y = (np.arange(ny) - (ny - 1) / 2) * cell
+    return np.meshgrid(x, y)
+
+
+def noise(shape, seed, sigma, amp=1.0):
+    """Gaussian-filtered white noise of standard deviation ``amp`` (features of ``sigma`` samples)."""
+    r = gaussian_filter(np.random.default_rng(seed).normal(size=shape), sigma, mode="wrap")
+    return amp * r / r.std()
+
+
+# -- scene assembly ---------------------------------------------------------------------------
+def amplified(name, heights, cell, preset, seed=7, steps=None):
+    """The scene document ``arches-render amplify`` writes for ``heights`` (data in scenes/gallery/data)."""
+    (GALLERY / DATA).mkdir(parents=True, exist_ok=True)
+    options = {"steps": steps} if steps is not None else None
+    with tempfile.TemporaryDirectory(dir=GALLERY) as tmp:
+        result = amplify(np.asarray(heights, np.float32), cell, preset, seed, Path(tmp), f"{DATA}/{name}",
+                         options=options)
+        for rel in result.files:
+            (GALLERY / rel).parent.mkdir(parents=True, exist_ok=True)
+            (Path(tmp) / rel).replace(GALLERY / rel)
+    # The command's own document (camera, sun, material from the geology, ground, water).
+    return amplify_command._scene_doc(result, name), result
+
+
+def finish(doc, name, description, camera, sun, atmosphere=None, spp=32, max_depth=4, exposure=0.0):
+    """Gallery settings on a scene document: 1280x720, camera, sun, atmosphere."""
+    doc["scene"] = {"name": name, "description": description}
+    doc["render"] = {"resolution": [1280, 720], "spp": spp, "max_depth": max_depth, "exposure": exposure}
+    doc["camera"] = camera
+    doc["lights"] = [dict({"type": "sunsky", "turbidity": 3.0}, **sun)]
+    if atmosphere is not None:
+        doc["atmosphere"] = atmosphere
+    order = ["scene", "render", "camera", "lights", "atmosphere", "materials", "meshes", "field"]
+    out = {k: doc[k] for k in order if k in doc}
+    out.update({k: v for k, v in doc.items() if k not in out})
+    return out
+
+
+def write(name, doc, header):
+    """Write ``scenes/gallery/NAME.toml``."""
+    GALLERY.mkdir(parents=True, exist_ok=True)
+    (GALLERY / f"{name}.toml").write_text(toml_text(doc, header))
+    print(f"wrote {GALLERY / f'{name}.toml'}")
+
+
+def glossy_water(doc):
+    """Water that mirrors the sky (a dark base under a smooth dielectric coating)."""
+    if "water" in doc["materials"]:
+        doc["materials"]["water"] = {"type": "glossy", "color": [0.015, 0.045, 0.05], "roughness": 0.04}
+
+
+# -- the scenes -------------------------------------------------------------------------------
+def island_dem():
+    """A chalk island: a tilted plateau with a headland, a neck and a stack, falling to the sea all round."""
+    nx, ny, cell = 161, 161, 1.0
+    X, Y = grid(nx, ny, cell)
+    # The main plateau: a rounded rectangle; a headland runs out to the south-west, its tip a stack.
+    body = 1.0 - (np.abs((X + 8.0) / 54.0) ** 3 + np.abs((Y - 14.0) / 42.0) ** 3) ** (2 / 3) \
+        + noise(X.shape, 4, 9.0, 0.22)
+    head = 1.0 - np.hypot((X + 42.0) / 12.0, (Y + 32.0) / 26.0) ** 2
+    neck = 1.0 - np.abs((X + 36.0) / 3.2) ** 2 - 2.0 * (1.0 - smooth((Y + 58.0) / 3.0) * smooth((-38.0 - Y) / 3.0))
+    stack = 1.0 - np.hypot((X + 34.0) / 8.0, (Y + 64.0) / 8.0) ** 2
+    shape = np.maximum.reduce([body, head, neck, stack]) + noise(X.shape, 3, 6.0, 0.12)
+    land = smooth(shape / 0.12)
+    # A tilted chalk down cut by dry valleys (the cliff height rises and falls along the coast).
+    top = 16.0 + 0.22 * (Y + 80.0) + 5.0 * np.sin(X / 15.0 + 0.3 * np.sin(Y / 20.0)) + noise(X.shape, 1, 12.0, 1.5)
+    return -6.0 + (top + 6.0) * land + noise(X.shape, 2, 2.0, 0.4) * land, cell
+
+
+def coastal_cliff():
+    """Fig. 23 (2019): chalk cliffs after three steps of sea erosion."""
+    H, cell = island_dem()
+    name = "fig23_coastal_cliff"
+    doc, _ = amplified(name, H, cell, "sea", seed=11)
+    glossy_water(doc)
+    doc = finish(doc, name, "Fig. 23 (Paris et al. 2019): chalk cliffs after three steps of sea erosion: "
+                 "notches, caves, a sea stack and an arch through the headland's neck",
+                 {"origin": [-100.0, -100.0, 12.0], "target": [-34.0, -46.0, 9.0], "fov": 50.0},
+                 {"elevation": 24.0, "azimuth": -125.0},
+                 {"haze": {"density": 0.0015, "height": 25.0}}, max_depth=3)
+    write(name, doc, "Gallery: Fig. 23 of Paris et al. 2019, coastal cliff (examples/make_gallery_scenes.py)")
+
+
+def crop_dem(file, rows, cols, cell):
+    """A crop of a DEM shipped in scenes/data (rows from the south), its lowest point at 0."""
+    H = np.load(REPO / "scenes" / "data" / file, allow_pickle=False)[rows[0]:rows[1], cols[0]:cols[1]]
+    return (H - H.min()).astype(np.float32), cell
+
+
+def river_camera(H, cell, at=0.3, ahead=0.65, height=1.6, fov=55.0):
+    """A camera low in the valley, looking down along it: the river is the DEM's lowest decile,
+    ordered along its principal axis; the camera stands at fraction ``at`` of it,
+    ``height / 4`` of the valley's relief above the bed, aiming at fraction ``ahead``."""
+    ny, nx = H.shape
+    X, Y = grid(nx, ny, cell)
+    low = H < np.percentile(H, 4)
+    pts = np.stack([X[low], Y[low], H[low]], axis=1)
+    axis = np.linalg.svd(pts[:, :2] - pts[:, :2].mean(0))[2][0]
+    order = np.argsort(pts[:, :2] @ axis)
+    a, b = pts[order[int(at * (len(order) - 1))]], pts[order[int(ahead * (len(order) - 1))]]
+    relief = float(np.percentile(H, 60) - a[2])
+    origin = [float(a[0]), float(a[1]), float(a[2] + height * 0.25 * relief)]
+    target = [float(b[0]), float(b[1]), float(b[2] + 0.22 * relief)]
+    return {"origin": origin, "target": target, "fov": fov}
+
+
+def canyon():
+    """Fig. 23 (2019): a canyon with deep overhangs, the river carving undercut walls."""
+    name = "fig23_canyon_overhangs"
+    H, cell = crop_dem("eroded_canyon.npy", (250, 410), (220, 380), 10.0)
+    doc, _ = amplified(name, H, cell, "river", seed=3)
+    glossy_water(doc)
+    camera = river_camera(H, cell, at=0.02, ahead=0.45, height=4.4, fov=60.0)  # from above the rim
+    doc = finish(doc, name, "Fig. 23 (Paris et al. 2019): a canyon whose river undercut its walls "
+                 "into deep overhangs", camera, {"elevation": 38.0, "azimuth": 60.0},
+                 {"haze": {"density": 0.0004, "height": 60.0}}, max_depth=3)
+    write(name, doc, "Gallery: Fig. 23 of Paris et al. 2019, canyon with overhangs (examples/make_gallery_scenes.py)")
+
+
+def karst():
+    """Fig. 17 (2019): sinkholes, tunnels and cave mouths in a mesa plateau, a few km across."""
+    name = "fig17_karst"
+    H, cell = crop_dem("eroded_mesas.npy", (40, 240), (60, 260), 15.0)
+    doc, _ = amplified(name, H, cell, "karst", seed=17)
+    # An oblique aerial view over the plateau's south-western cliffs (lowest point at z = 0).
+    camera = {"origin": [-1450.0, -1350.0, 480.0], "target": [-150.0, -100.0, 200.0], "fov": 50.0}
+    doc = finish(doc, name, "Fig. 17 (Paris et al. 2019): karst tunnels opening as cave mouths "
+                 "in the cliffs of a mesa plateau", camera, {"elevation": 30.0, "azimuth": -35.0},
+                 {"haze": {"density": 0.0003, "height": 80.0}}, max_depth=3)
+    write(name, doc, "Gallery: Fig. 17 of Paris et al. 2019, karst (examples/make_gallery_scenes.py)")
+
+
+def cove_dem():
+    """A limestone plateau ending in a wavy sea cliff over a sand cove, a headland to the east."""
+    nx, ny, cell = 141, 121, 1.0
+    X, Y = grid(nx, ny, cell)
+    # The cliff line wanders; behind it a plateau at ~22 m rising gently inland.
+    edge = 6.0 + 6.0 * np.sin(X / 17.0) + 3.0 * np.sin(X / 7.3 + 1.0) + noise(X.shape, 21, 8.0, 1.2)
+    edge = np.where(X > 35.0, edge - 1.6 * (X - 35.0), edge)  # the headland juts seaward
+    cliff = smooth((Y - edge) / 3.5)
+    plateau = 21.0 + 0.06 * (Y - edge) + noise(X.shape, 22, 10.0, 1.3)
+    # The cove floor: a beach rising from the sea (z < 0 south of y ~ -28) to the cliff foot.
+    floor = -4.0 + 6.5 * smooth((Y + 46.0) / 36.0) + noise(X.shape, 23, 6.0, 0.25)
+    return floor + (plateau - floor) * cliff + noise(X.shape, 24, 1.5, 0.15) * cliff, cell
+
+
+def every_generator():
+    """Item 5 of issue 15: one landscape holding all five generators."""
+    name = "every_generator"
+    H, cell = cove_dem()
+    doc, _ = amplified(name, H, cell, "sea", seed=5)
+    glossy_water(doc)
+    nodes = doc["nodes"]
+    terrain_root = doc["field"]["root"]
+    # Implicit blocks (Paris et al. 2020) where the amplified terrain is steep: host = the terrain.
+    nodes["cliff_blocks"] = {"type": "blocks", "host": terrain_root, "structure": "rhombohedral",
+                             "tile_size": 16.0, "spacing": 2.2, "obliquity": 20.0, "joint_width": 0.16,
+                             "smoothness": 0.3, "warp": 0.05, "warp_wavelength": 0.9,
+                             "region": [-70.0, -20.0, 2.0, 70.0, 40.0, 26.0],
+                             "distance_range": [-2.0, 1.0], "min_slope": 55.0, "protrusion": 0.8, "seed": 3}
+    # A layered sand deposit (Peytavie et al. 2009) on the cove: material stacks over the terrain,
+    # sand dropped by the deposit brush and spread at its angle of repose.
+    nodes["cove_sand"] = {"type": "layers", "source": "node", "node": terrain_root, "cell": 0.5,
+                          "extent": [-40.0, -34.0, 20.0, -6.0], "z_range": [-5.0, 8.0],
+                          "column": [{"material": "sand", "thickness": 0.3}, {"material": "bedrock"}],
+                          "seed": 5,
+                          "operations": [{"tool": "deposit", "center": [-18.0, -16.0], "radius": 9.0,
+                                          "amount": 1.6},
+                                         {"tool": "deposit", "center": [2.0, -20.0], "radius": 7.0,
+                                          "amount": 1.2}]}
+    nodes["coast"] = {"type": "union", "children": ["cliff_blocks", "cove_sand"]}
+    doc["field"]["root"] = "coast"
+    doc["materials"]["landscape"]["masks"] = [
+        {"layer": "sand", "node": {"type": "layers_ratio", "terrain": "cove_sand", "material": "sand",
+                                   "sigma": 0.5}, "lo": 0.15, "hi": 0.5}]
+    # A window fin from the 3-G-map evolution (Bezin et al.), as meshes, scaled to the cove.
+    doc["materials"]["fin"] = {"type": "triplanar", "preset": "sandstone",
+                               "overrides": {"rock.scale": 4.0, "sand.scale": 2.0}}
+    # Only the fin (volume 0): its limestone plinth (volume 1) would read as a pedestal on the sand;
+    # the fin's foot is sunk 0.6 m into the cove, its window turned to the camera.
+    doc["meshes"].append({"file": f"{DATA}/gmaps_arch/volume_0.ply", "material": "fin",
+                          "translate": [-24.0, -8.0, 1.0], "scale": 3.0,
+                          "rotate": {"axis": [0.0, 0.0, 1.0], "angle": -36.0}})
+    # Rock piles (Peytavie et al. 2009) at the cliff foot: support = the terrain field.
+    doc["rock_piles"] = [{"support": terrain_root, "extent": [-12.0, 4.0, -2.0, 14.0, 16.0, 6.0],
+                          "rock_size": 0.9, "n": 4, "seed": 9, "g_max": 4.0, "min_inside": 0.35,
+                          "erosion": {"steps": 8, "rate": 0.5}, "preset": "limestone",
+                          # The cliff's own stone, darker: fallen blocks are fresh and in shade.
+                          "overrides": {"rock.scale": 2.0, "rock.tint": [0.42, 0.39, 0.34],
+                                        "bedding.coverage": 0.0}}]
+    doc = finish(doc, name, "One landscape, every generator: an amplified sea cliff (2019) with implicit "
+                 "blocks on its face (2020), rock piles at its foot and a layered sand cove (2009) "
+                 "with a 3-G-map window fin",
+                 {"origin": [-48.0, -42.0, 11.0], "target": [-4.0, 8.0, 9.0], "fov": 55.0},
+                 {"elevation": 34.0, "azimuth": -65.0},
+                 {"haze": {"density": 0.001, "height": 20.0}}, max_depth=3, exposure=0.5)
+    write(name, doc, "Gallery: every generator in one landscape, issue 15 item 5 "
+                     "(examples/make_gallery_scenes.py)")
+
+
+SCENES = {"every_generator": every_generator, "fig23_coastal_cliff": coastal_cliff,
+          "fig23_canyon_overhangs": canyon, "fig17_karst": karst}
+
+
+def main(names):
+    for n in names or SCENES:
+        SCENES[n]()
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
