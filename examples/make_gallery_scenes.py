@@ -164,6 +164,19 @@ def canyon():
     write(name, doc, "Gallery: Fig. 23 of Paris et al. 2019, canyon with overhangs (examples/make_gallery_scenes.py)")
 
 
+def goblins():
+    """Fig. 23 (2019): goblins (hoodoos) along the banks of a river, in alternating hard and soft strata."""
+    name = "fig23_goblins"
+    H, cell = crop_dem("eroded_canyon.npy", (300, 400), (330, 430), 10.0)
+    doc, _ = amplified(name, H, cell, "hoodoos", seed=23)
+    glossy_water(doc)
+    camera = river_camera(H, cell, at=0.05, ahead=0.5, height=3.0, fov=55.0)
+    doc = finish(doc, name, "Fig. 23 (Paris et al. 2019): goblins weathered out of the soft strata "
+                 "along a river's banks", camera, {"elevation": 28.0, "azimuth": 120.0},
+                 {"haze": {"density": 0.0004, "height": 60.0}}, max_depth=3)
+    write(name, doc, "Gallery: Fig. 23 of Paris et al. 2019, goblins (examples/make_gallery_scenes.py)")
+
+
 def karst():
     """Fig. 17 (2019): sinkholes, tunnels and cave mouths in a mesa plateau, a few km across."""
     name = "fig17_karst"
@@ -256,7 +269,7 @@ def every_generator():
 
 
 SCENES = {"every_generator": every_generator, "fig23_coastal_cliff": coastal_cliff,
-          "fig23_canyon_overhangs": canyon, "fig17_karst": karst}
+          "fig23_canyon_overhangs": canyon, "fig23_goblins": goblins, "fig17_karst": karst}
 
 
 def main(names):
