@@ -160,3 +160,22 @@ def test_coastal_dem_of_hundreds_of_km_renders_a_landscape(tmp_path):
     desc, shots = _render_all_cameras(out, 48, 27)
     _check_shots(desc, shots)
 
+
+
+def test_lakes_at_spill_level_and_no_flooded_canyon_floor():
+    from arches_render.generators.terrain.water import find_water
+    # A closed crater with a rim on a gently tilted plain: one lake at the rim's lowest point.
+    x = np.linspace(-1, 1, 64)
+    X, Y = np.meshgrid(x, x)
+    r = np.hypot(X, Y)
+    H = 100.0 + 10.0 * X + 40.0 * np.exp(-((r - 0.3) / 0.08) ** 2) - 30.0 * (r < 0.25)
+    w = find_water(H, 0.0)
+    assert w.sea_level is None and len(w.lakes) == 1, w.lakes
+    level, cells = w.lakes[0]
+    inside = r < 0.25
+    assert cells >= inside.sum() and np.all(level > H[inside])
+    ring = (r > 0.28) & (r < 0.32)
+    assert H[ring].min() - 1.0 < level <= H[ring].min() + 1e-6  # where the rim is lowest: it spills
+    # The flat floor of the real canyon has resampling pits of 1-4 m: no lake there.
+    canyon = np.load(REPO / "scenes" / "data" / "real_nm_canyon_10m.npy")
+    assert find_water(canyon, 0.0).lakes == []
