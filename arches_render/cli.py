@@ -47,8 +47,11 @@ def main(argv=None) -> int:
     except (SceneError, UsageError, ResourceError) as exc:
         print(f"arches-render: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
-    except OutputError as exc:
-        print(f"arches-render: error: {exc}", file=sys.stderr)
+    except OSError as exc:
+        # An output that cannot be written (OutputError names it), or any other I/O
+        # failure of the machine (a full disk in a library's own writer): one line.
+        msg = str(exc) if isinstance(exc, OutputError) or not exc.filename else f"{exc.filename}: {exc.strerror}"
+        print(f"arches-render: error: {msg}", file=sys.stderr)
         return EXIT_FAILURE
     except BackendError as exc:
         print(f"arches-render: error: {exc}", file=sys.stderr)

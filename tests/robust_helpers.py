@@ -42,10 +42,17 @@ def write(folder: Path, text: str, name: str = "scene.toml") -> Path:
 
 def cli(capsys, *args) -> tuple[int, str]:
     """Run ``arches-render ARGS`` in this process; return the exit status and stderr."""
+    rc, _, err = cli_out(capsys, *args)
+    return rc, err
+
+
+def cli_out(capsys, *args) -> tuple[int, str, str]:
+    """Run ``arches-render ARGS`` in this process; return the exit status, stdout and stderr."""
     from arches_render.cli import main
     capsys.readouterr()
     rc = main([str(a) for a in args])
-    return rc, capsys.readouterr().err
+    cap = capsys.readouterr()
+    return rc, cap.out, cap.err
 
 
 def assert_one_line_error(rc: int, err: str, *words: str) -> str:

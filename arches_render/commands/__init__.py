@@ -139,7 +139,8 @@ def writable_output(out: Path, folder: bool = False, create: bool = False) -> Pa
         elif folder and not where.exists() and where.parent.is_dir():
             where.mkdir()
     except OSError as exc:
-        raise UsageError(f"-o/--output {out}: cannot create folder {where} ({exc.strerror})") from None
+        raise UsageError(f"-o/--output {out}: folder {where.parent} is not writable "
+                         f"(cannot create {where.name}: {exc.strerror})") from None
     if not where.is_dir():
         raise UsageError(f"-o/--output {out}: folder {where} does not exist" if not where.exists()
                          else f"-o/--output {out}: {where} is not a folder")

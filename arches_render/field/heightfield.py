@@ -45,6 +45,11 @@ import numpy as np
 from .node import Node, opaque_float
 
 
+#: Largest height or extent coordinate (m), ten times Earth's radius: beyond it a value
+#: is a unit error, and the slope bound computed from it would overflow float64.
+MAX_COORDINATE = 6.4e7
+
+
 def height_grid(heights, extent):
     """Validate the elevation grid of a heightfield node (shared by every heightfield type).
 
@@ -71,7 +76,11 @@ def height_grid(heights, extent):
         raise ValueError("heights must be a 2-D array of at least 2x2 samples")
     if not np.all(np.isfinite(H)):
         raise ValueError("heights contain NaN or infinite values")
+    if np.abs(H).max() > MAX_COORDINATE:
+        raise ValueError(f"heights must lie within +-{MAX_COORDINATE:g} m (got {np.abs(H).max():.3g})")
     x0, y0, x1, y1 = (float(v) for v in extent)
+    if not all(abs(v) <= MAX_COORDINATE for v in (x0, y0, x1, y1)):
+        raise ValueError(f"extent must lie within +-{MAX_COORDINATE:g} m")
     if not (x1 > x0 and y1 > y0):
         raise ValueError("extent must satisfy x1 > x0 and y1 > y0")
     return H, (x0, y0, x1, y1)

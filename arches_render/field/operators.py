@@ -188,6 +188,7 @@ class SmoothIntersection(_NAry):
         super().__init__(*children)
         if not radius > 0:
             raise ValueError("smooth_intersection radius must be > 0")
+        self.radius_np = float(radius)
         self.radius = opaque_float(radius)
 
     def eval(self, p):

@@ -231,8 +231,9 @@ def _integrate_emitter(light: dict, n: int = 1 << 16, seed: int = 7):
     it = dr.zeros(mi.Interaction3f, n)
     rng = mi.PCG32(n, seed)
     ds, w = em.sample_direction(it, mi.Point2f(rng.next_float32(), rng.next_float32()), True)
-    w = np.asarray(w, np.float64).reshape(3, n)
-    d = np.asarray(ds.d, np.float64).reshape(3, n)
+    # A constant emitter returns one literal weight, not one per sample: broadcast.
+    w = np.broadcast_to(np.asarray(w, np.float64).reshape(3, -1), (3, n))
+    d = np.broadcast_to(np.asarray(ds.d, np.float64).reshape(3, -1), (3, n))
     w = np.where(np.isfinite(w), w, 0.0)
     up = d[2] > 0.0
     total = (w * up).mean(axis=1)

@@ -65,6 +65,8 @@ from .paths import scene_file
 from .texture_files import check_texture, layer_textures
 from .validate import Table
 
+#: Light types that are Mitsuba environment emitters (a scene may hold one).
+ENVIRONMENT_LIGHTS = ("sunsky", "constant", "envmap")
 GEOMETRY_MODES = ("field", "mesh")
 
 
@@ -315,6 +317,8 @@ def read_toml(path) -> dict:
         raise SceneError(path, "", "no such scene file") from None
     except tomlfile.TOMLDecodeError as exc:
         raise SceneError(path, "", f"not valid TOML: {exc}") from None
+    except RecursionError:  # tomllib recurses once per level of inline tables and arrays
+        raise SceneError(path, "", "not valid TOML: inline tables or arrays nested too deeply") from None
     except OSError as exc:
         raise SceneError(path, "", f"cannot read: {exc.strerror}") from None
 
@@ -377,6 +381,10 @@ def parse_scene(data: dict, path) -> SceneDescription:
     lights = [_light(t, base_dir) for t in root.tables("lights")]
     if not lights:
         raise root.error("lights", "at least one light is required ([[lights]] with type = sunsky, ...)")
+    environments = [d["type"] for d in lights if d["type"] in ENVIRONMENT_LIGHTS]
+    if len(environments) > 1:  # Mitsuba's scene holds one environment emitter
+        raise root.error("lights", f"at most one of {', '.join(ENVIRONMENT_LIGHTS)} may be given "
+                                   f"(got {', '.join(environments)}); add directional or point lights instead")
 
     at = root.table("atmosphere", None)
     atmosphere = _atmosphere(at, lights) if at is not None else None

@@ -53,6 +53,10 @@ from .paths import scene_file
 from .validate import Table
 
 
+#: Deepest nesting of node tables (inline or named) a scene may use.
+MAX_NESTING = 100
+
+
 def fbm_args(t: Table, amplitude=1.0, wavelength=1.0, octaves=4):
     """The fBm keys (amplitude, wavelength, octaves, lacunarity, gain, seed) of a node table.
 
@@ -210,6 +214,7 @@ class NodeBuilder:
         self.progress = progress
         self.built: dict[str, F.Node] = {}
         self.stack: list[str] = []
+        self.depth = 0
 
     def define(self, name: str, table: dict) -> None:
         """Add the named node table ``name`` (as if under ``[nodes]``); it is built on first use.
@@ -253,11 +258,18 @@ class NodeBuilder:
     def node(self, t: Table) -> F.Node:
         types = node_types()
         kind = t.string("type", choices=set(types))
+        if self.depth >= MAX_NESTING:
+            # Building, bounding and evaluating a tree recurse once per level: a
+            # deeper tree would end in Python's RecursionError, not in a clear error.
+            raise SceneError(self.file, t.path, f"nodes are nested deeper than {MAX_NESTING} levels")
+        self.depth += 1
         try:
             node = types[kind](t, self)
         except SceneError:
             raise
         except ValueError as exc:  # a constructor's own check: name the node
             raise SceneError(self.file, t.path, str(exc)) from None
+        finally:
+            self.depth -= 1
         t.finish()
         return node

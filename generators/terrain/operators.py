@@ -141,7 +141,7 @@ class Sum(Node):
                 ask = [c + sum(sups[j] for j in others) for c in levels]
                 # Caps pay only where operands add matter (M > 0): with carving sets
                 # (M <= 0) the global shift is already small.
-                plan = [j for j in others if caps[j] is not None and sups[j] > 0] if sups[i] > 0 else []
+                plan = [j for j in others if caps[j] is not None and sups[j] > 0] if sups[i] is not None and sups[i] > 0 else []
                 if plan:
                     shift = sum(caps[j] if j in plan else sups[j] for j in others)
                     ask += [c + shift for c in levels]
