@@ -18,7 +18,8 @@ picks from the DEM: :func:`.preset_choice.choose_preset`; or sea, river, karst,
 hoodoos, strata), ``--sea-level`` (metres, default 0), ``--precision`` (smallest
 detail in metres; default 10 cm for DEMs of 2 m cells or finer, cell / 16
 otherwise), ``--seed``, ``--max-cells`` (larger DEMs are block-averaged down to it,
-default 8192^2: the reduction is printed and written in the scene's header),
+default 8192^2: the reduction is printed and written in the scene's header; at 8192^2
+the implicit heightfield alone holds 1.3 GB, heights and maximum mipmaps, 2.6 GB peak),
 ``--data-dir`` (relative to the scene's folder), ``-q``.
 
 Limits (exit 2, one line naming the file): at least 3 samples a side, sides at
