@@ -3,7 +3,8 @@
     python benchmarks/run.py [--json] [--repeat N] [NAME ...]
 
 This file holds the foundation's benchmarks, ``bench_production.py`` the
-production ones (turntables, Dask), ``bench_heightfield.py`` the heightfield cast. Each generator keeps its own in its package
+production ones (turntables, Dask), ``bench_heightfield.py`` the heightfield cast,
+``bench_tracing.py`` the direct tracer's (level of detail, pruning). Each generator keeps its own in its package
 (``generators/NAME/benchmarks.py``), declared as ``BENCHMARKS = {name: (fn, repeat)}``
 with ``fn(repeat) -> dict(value, unit, baseline, baseline_is, ...)`` in the
 registry (:mod:`arches_render.extensions`) and documented in its docstring; they
@@ -17,7 +18,8 @@ Figures (medians over ``--repeat`` runs, warm kernels unless stated):
                          grid; baseline: the same capsules as a brute-force loop.
 ``render_field_vs_mesh`` sphere-traced time / marching-cubes mesh time (stock
                          ``path``), default scene, same camera, spp and resolution;
-                         baseline: the goal, 2.
+                         baseline: the goal, 2. Extra fields: the field at full
+                         detail (level of detail off) in the same run, the load.
 ``render_default_s``     ``arches-render render scenes/default.toml`` (640x360, 64 spp)
                          in a fresh process with an empty kernel cache, JIT included;
                          baseline: the goal, 30 s.
@@ -43,6 +45,7 @@ import numpy as np
 
 import bench_heightfield  # benchmarks/ is on sys.path as the script's folder
 import bench_production
+import bench_tracing
 from arches_render.render.renderer import build_scene, render_image
 from arches_render.scene import load_scene
 from arches_render.timing import REPO, median_renders, random_points, timed_eval
@@ -101,14 +104,19 @@ def bench_render_field_vs_mesh(repeat):
     desc = load_scene(REPO / "scenes" / "default.toml")
     w, h, spp = 320, 180, 16
     out, scenes = {}, []
+    load0 = os.getloadavg()[0]
     for geometry in ("field", "mesh"):
         t0 = time.perf_counter()
         scenes.append(build_scene(desc, geometry, w, h))
         out[geometry + "_setup"] = time.perf_counter() - t0
-    out["field"], out["mesh"] = median_renders(scenes, spp, repeat)
+    # The same field at full detail (footprint level of detail off), in the same run.
+    scenes.append(build_scene(desc, "field", w, h))
+    scenes[-1].integrator().lod = False
+    out["field"], out["mesh"], out["full"] = median_renders(scenes, spp, repeat)
     return dict(value=out["field"] / out["mesh"], unit="x", baseline=2.0, baseline_is="goal",
                 field_s=out["field"], mesh_s=out["mesh"], mesh_setup_s=out["mesh_setup"],
-                resolution=f"{w}x{h}", spp=spp)
+                field_full_detail_s=out["full"], ratio_full_detail=out["full"] / out["mesh"],
+                resolution=f"{w}x{h}", spp=spp, load=round(0.5 * (load0 + os.getloadavg()[0]), 2))
 
 
 def bench_render_default_s(repeat):
@@ -137,7 +145,8 @@ BENCHMARKS = {
 
 def all_benchmarks() -> dict:
     """The benchmarks above, the production ones and every generator's (the registry)."""
-    core = {**BENCHMARKS, **bench_production.BENCHMARKS, **bench_heightfield.BENCHMARKS}
+    core = {**BENCHMARKS, **bench_production.BENCHMARKS, **bench_heightfield.BENCHMARKS,
+            **bench_tracing.BENCHMARKS}
     return {**core, **extensions.benchmarks(core=core)}
 
 

@@ -84,14 +84,19 @@ def test_lipschitz_bound_holds(name):
             f"{name}: max slope {ratio.max():.4f} > L = {node.lipschitz:.4f}"
 
 
-def _free_ball_violations(node, level, direction):
+def free_ball_violations(node, level, direction, footprint_of=None, evaluate=F.evaluate, rounds=24):
+    """Largest ``f + level`` found inside the balls (or two-sided segments along
+    ``direction``) that ``eval_bounds`` declares free; ``footprint_of(points)``: a
+    footprint for ``eval_bounds`` (test_lod.py), ``evaluate(node, points)``: the field
+    those bounds are of."""
     pts = random_points(4_000, -5, 5, seed=7)
-    f, (d,) = node.eval_bounds(_points(pts), (level,), direction)
+    fp = None if footprint_of is None else footprint_of(pts)
+    f, (d,) = node.eval_bounds(_points(pts), (level,), direction, fp)
     dr.eval(f, d)
     d = d.numpy().astype(np.float64)
     rng = np.random.default_rng(11)
     worst = -np.inf
-    for _ in range(24):
+    for _ in range(rounds):
         if direction is None:
             v = rng.normal(size=pts.shape)
             v /= np.linalg.norm(v, axis=1, keepdims=True)
@@ -99,7 +104,7 @@ def _free_ball_violations(node, level, direction):
         else:
             dd = np.array([direction.x[0], direction.y[0], direction.z[0]], dtype=np.float64)
             q = pts + dd * (d * rng.uniform(-1, 1, len(d)))[:, None]  # both sides of the line
-        inside = F.evaluate(node, q) + level
+        inside = evaluate(node, q) + level
         worst = max(worst, float(np.max(np.where(d > 1e-6, inside, -np.inf))))
     return worst
 
@@ -108,14 +113,14 @@ def _free_ball_violations(node, level, direction):
 @pytest.mark.parametrize("level", [0.0, 0.3])
 def test_local_distance_bound_is_free(name, level):
     node = NODES[name]
-    assert _free_ball_violations(node, level, None) <= 1e-4
+    assert free_ball_violations(node, level, None) <= 1e-4
 
 
 @pytest.mark.parametrize("name", ["heightfield", "blend", "culled_blend", "rotate", "union"])
 def test_ray_distance_bound_is_free(name):
     for d in ([1, 0.3, -0.2], [0, 0, -1], [0.6, -0.8, 0.05], [-0.2, 0.4, 0.7]):
         v = np.asarray(d, float) / np.linalg.norm(d)
-        assert _free_ball_violations(NODES[name], 0.0, mi.Vector3f(*(float(x) for x in v))) <= 1e-4
+        assert free_ball_violations(NODES[name], 0.0, mi.Vector3f(*(float(x) for x in v))) <= 1e-4
 
 
 @pytest.mark.parametrize("name", sorted(n for n in NODES if n != "noise"))

@@ -53,11 +53,11 @@ class Culled(Node):
     def eval(self, p):
         return self.children[0].eval(p)
 
-    def eval_bounds(self, p, levels, direction=None):
+    def eval_bounds(self, p, levels, direction=None, footprint=None):
         dist = box_distance(p, self._lo, self._hi)
 
         def near(p, dist):
-            return self.children[0].eval_bounds(p, levels, direction)
+            return self.children[0].eval_bounds(p, levels, direction, footprint)
 
         def far(p, dist):
             return -dist, tuple(dr.maximum(dist - c, 0.0) for c in levels)

@@ -156,7 +156,7 @@ class Heightfield(Node):
                         dr.abs(p.z - self._bc[2]) - self._bh[2])
         return -(dr.norm(dr.maximum(q, 0.0)) + dr.minimum(dr.maximum(dr.maximum(q.x, q.y), q.z), 0.0))
 
-    def eval_bounds(self, p, levels, direction=None):
+    def eval_bounds(self, p, levels, direction=None, footprint=None):
         # An intersection of the ground and the box: as far as the farther one.
         box = self._box(p)
         top = self.height(p.x, p.y) - p.z

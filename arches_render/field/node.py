@@ -30,6 +30,12 @@ questions:
     sides (``|s| < d`` is free): a free ball is one such bound, and nodes that know
     better (heightfields) return more. Two-sided intervals are what over-relaxed
     sphere tracing needs to check that consecutive steps overlap.
+
+    With ``footprint`` (a :class:`~arches_render.field.lod.Footprint`: the ray cone's
+    radius at ``p`` and its rate), the value and the bounds are those of the node's
+    *footprint field*, where octaves finer than the cone are skipped
+    (:mod:`arches_render.field.lod`); operators pass it to their operands, nodes
+    without octaves ignore it. ``None``: full detail, the field of ``eval``.
 """
 
 from __future__ import annotations
@@ -77,8 +83,9 @@ class Node:
         """Field value at the points ``p`` (``mi.Point3f``) as ``mi.Float``."""
         raise NotImplementedError
 
-    def eval_bounds(self, p, levels, direction=None):
-        """``(f, ds)``: value and lower bounds of the distances to ``{f >= -c}``, c in levels."""
+    def eval_bounds(self, p, levels, direction=None, footprint=None):
+        """``(f, ds)``: value and lower bounds of the distances to ``{f >= -c}``, c in levels
+        (module docstring; this default ignores ``footprint``: full detail)."""
         f = self.eval(p)
         return f, hart_bounds(f, levels, self.lipschitz)
 
@@ -99,6 +106,13 @@ class Node:
     #: distances, heightfield prisms, Boolean and blend operators, displacements with
     #: grown boxes, rigid and uniformly scaled transforms).
     unit_falloff = True
+
+    @property
+    def lod_kappa(self) -> float:
+        """``kappa`` of :mod:`~arches_render.field.lod`: with a footprint of rate ``s`` the
+        node's footprint field is ``L (1 + kappa s)``-Lipschitz (0: no level of detail
+        in this subtree, the field is the full one)."""
+        return max((c.lod_kappa for c in self.children), default=0.0)
 
     @property
     def cost(self) -> float:
@@ -195,7 +209,7 @@ def evaluate(node: Node, points: np.ndarray, batch: int = 1 << 20) -> np.ndarray
     return out
 
 
-def gradient(node: Node, p, h: float | None = None, culled: bool = False):
+def gradient(node: Node, p, h: float | None = None, culled: bool = False, footprint=None):
     """Field gradient at ``p`` by the tetrahedron technique (four evaluations).
 
     Central differences with 4 taps along the vertices of a tetrahedron
@@ -213,6 +227,9 @@ def gradient(node: Node, p, h: float | None = None, culled: bool = False):
     culled : bool
         Evaluate through ``eval_bounds`` so that culled subtrees are skipped (the
         values agree near surfaces, see :mod:`arches_render.field.culling`).
+    footprint : Footprint, optional
+        The gradient of the footprint field (through ``eval_bounds``), as the tracer
+        that found the hit saw it.
 
     Returns
     -------
@@ -224,5 +241,6 @@ def gradient(node: Node, p, h: float | None = None, culled: bool = False):
     for k in ((1, -1, -1), (-1, -1, 1), (-1, 1, -1), (1, 1, 1)):
         kv = mi.Vector3f(*k)
         q = p + kv * h
-        g += kv * (node.eval_bounds(q, ())[0] if culled else node.eval(q))
+        through = culled or footprint is not None
+        g += kv * (node.eval_bounds(q, (), footprint=footprint)[0] if through else node.eval(q))
     return g / (4.0 * h)

@@ -105,7 +105,7 @@ def gradient_noise(p, seed):
     return result
 
 
-def fbm(p, octaves: int, lacunarity, gain, seed):
+def fbm(p, octaves: int, lacunarity, gain, seed, level=None):
     """Fractional Brownian motion: ``sum_k gain^k n(lacunarity^k p)``.
 
     Parameters
@@ -118,6 +118,11 @@ def fbm(p, octaves: int, lacunarity, gain, seed):
         Frequency and amplitude ratio between octaves.
     seed : mi.UInt32
         Base seed; octave ``k`` uses ``seed + k``.
+    level : mi.Float, optional
+        Footprint level of detail (:mod:`arches_render.field.lod`): octave ``k`` is
+        weighted by ``clamp(level - k, 0, 1)`` and not evaluated where that is 0 (a
+        symbolic branch: packets where no lane needs it skip it). ``None``: every
+        octave, bitwise as with a level above ``octaves``.
 
     Returns
     -------
@@ -128,7 +133,14 @@ def fbm(p, octaves: int, lacunarity, gain, seed):
     q = mi.Point3f(p)
     for k in range(int(octaves)):
         # A fixed irrational offset per octave hides the shared lattice origin.
-        total += amp * gradient_noise(q + 17.31 * k, seed + k)
+        if level is None:
+            total += amp * gradient_noise(q + 17.31 * k, seed + k)
+        else:
+            w = dr.clip(level - k, 0.0, 1.0)
+            total = dr.if_stmt((total, amp, q, w, seed), w > 0.0,
+                               lambda total, amp, q, w, seed, k=k:
+                               total + w * (amp * gradient_noise(q + 17.31 * k, seed + k)),
+                               lambda total, amp, q, w, seed: total, label="fbm_octave")
         q = q * lacunarity
         amp = amp * gain
     return total

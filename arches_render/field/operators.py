@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import drjit as dr
 
+from .lod import lod_lipschitz
 from .node import Node, box_intersection, box_union, hart_bounds, opaque_float
 
 
@@ -67,10 +68,10 @@ class _Lattice(_NAry):
             v = self._value(v, c.eval(p))
         return v
 
-    def eval_bounds(self, p, levels, direction=None):
-        f, ds = self.children[0].eval_bounds(p, levels, direction)
+    def eval_bounds(self, p, levels, direction=None, footprint=None):
+        f, ds = self.children[0].eval_bounds(p, levels, direction, footprint)
         for c in self.children[1:]:
-            fc, dc = c.eval_bounds(p, levels, direction)
+            fc, dc = c.eval_bounds(p, levels, direction, footprint)
             f, ds = self._value(f, fc), tuple(self._distance(a, b) for a, b in zip(ds, dc))
         return f, ds
 
@@ -123,8 +124,10 @@ class Difference(_NAry):
             v = dr.minimum(v, -c.eval(p))
         return v
 
-    def eval_bounds(self, p, levels, direction=None):
-        f, ds = self.children[0].eval_bounds(p, levels, direction)
+    def eval_bounds(self, p, levels, direction=None, footprint=None):
+        # The subtracted operands keep full detail (``eval``): their bound needs
+        # their true value, which a culled subtree's far answer is not.
+        f, ds = self.children[0].eval_bounds(p, levels, direction, footprint)
         for c in self.children[1:]:
             fc = c.eval(p)
             f = dr.minimum(f, -fc)
@@ -154,13 +157,13 @@ class Blend(_NAry):
             v = smooth_max(v, c.eval(p), self.radius)
         return v
 
-    def eval_bounds(self, p, levels, direction=None):
+    def eval_bounds(self, p, levels, direction=None, footprint=None):
         m = len(levels)
         seam = self.radius * ((len(self.children) + 3) * 0.25)
         asked = tuple(levels) + tuple(c + seam for c in levels)
         v = None
         for child in self.children:
-            fc, dc = child.eval_bounds(p, asked, direction)
+            fc, dc = child.eval_bounds(p, asked, direction, footprint)
             if v is None:
                 v, own, first, second = fc, list(dc[:m]), list(dc[m:]), [dr.inf] * m
                 continue
@@ -169,7 +172,7 @@ class Blend(_NAry):
                 own[i] = dr.minimum(own[i], dc[i])
                 second[i] = dr.minimum(second[i], dr.maximum(first[i], dc[m + i]))
                 first[i] = dr.minimum(first[i], dc[m + i])
-        hart = hart_bounds(v, levels, self.lipschitz)
+        hart = hart_bounds(v, levels, lod_lipschitz(self, footprint))
         return v, tuple(dr.maximum(dr.minimum(o, s2), h) for o, s2, h in zip(own, second, hart))
 
     def bounds(self):
@@ -197,11 +200,11 @@ class SmoothIntersection(_NAry):
             v = -smooth_max(-v, -c.eval(p), self.radius)
         return v
 
-    def eval_bounds(self, p, levels, direction=None):
+    def eval_bounds(self, p, levels, direction=None, footprint=None):
         # -smax(-a, -b) >= -c implies min(a, b) >= -c: inside both operands' sets.
-        v, ds = self.children[0].eval_bounds(p, levels, direction)
+        v, ds = self.children[0].eval_bounds(p, levels, direction, footprint)
         for c in self.children[1:]:
-            fc, dc = c.eval_bounds(p, levels, direction)
+            fc, dc = c.eval_bounds(p, levels, direction, footprint)
             v, ds = -smooth_max(-v, -fc, self.radius), tuple(dr.maximum(a, b) for a, b in zip(ds, dc))
         return v, ds
 

@@ -139,7 +139,7 @@ class CapsuleSet(Node):
         iz = mi.UInt32(dr.clip((p.z - self._glo[2]) * self._inv_cell, 0.0, rz - 1.0))
         return (iz * ry + iy) * rx + ix
 
-    def eval_bounds(self, p, levels, direction=None):
+    def eval_bounds(self, p, levels, direction=None, footprint=None):
         f = self.eval(p)
         empty = dr.gather(mi.Float, self._empty, self._cell(p))
         return f, tuple(dr.maximum(dr.maximum(-f - c, 0.0), empty - c) for c in levels)

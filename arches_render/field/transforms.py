@@ -45,6 +45,7 @@ class Transform(Node):
         self.t = np.asarray(offset, dtype=np.float64).reshape(3)
         self.Minv = np.linalg.inv(M)
         self.s_np = float(sv[-1])
+        self.sigma_max = float(sv[0])
         self._minv = [[opaque_float(self.Minv[i, j]) for j in range(3)] for i in range(3)]
         self._t = [opaque_float(v) for v in self.t]
         self._s = opaque_float(self.s_np)
@@ -73,11 +74,16 @@ class Transform(Node):
     def eval(self, p):
         return self._s * self.children[0].eval(self._local(p))
 
-    def eval_bounds(self, p, levels, direction=None):
+    def eval_bounds(self, p, levels, direction=None, footprint=None):
         # s f_c >= -c  <=>  f_c >= -c / s; a local distance d is a world distance
-        # of at least sigma_min d = s d.
+        # of at least sigma_min d = s d. A world cone of radius r covers local lengths
+        # of at least r / sigma_max (the child keeps at least the detail it should);
+        # as a function of the local point that radius keeps its rate.
         inv_s = 1.0 / self.s_np
-        f, ds = self.children[0].eval_bounds(self._local(p), tuple(c * inv_s for c in levels))
+        if footprint is not None:
+            footprint = footprint.scaled(1.0 / self.sigma_max)
+        f, ds = self.children[0].eval_bounds(self._local(p), tuple(c * inv_s for c in levels),
+                                             footprint=footprint)
         return self._s * f, tuple(self._s * d for d in ds)
 
     def bounds(self):

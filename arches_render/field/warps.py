@@ -15,6 +15,12 @@ Bounds of displaced or warped solids grow by the largest offset they can cause;
 this assumes the child's field falls at least at unit rate away from its box,
 which holds for the primitives, heightfields and Boolean operators of the language.
 
+With a footprint (:mod:`~arches_render.field.lod`) the three nodes evaluate the
+octaves their cone resolves, with the truncated sum's bounds: its range is at most
+the full one (the boxes and the displacement's envelope stay valid), its slope is
+the truncated slope within the reach ``rho`` of the point and the full slope times
+``1 + kappa s`` beyond.
+
 References
 ----------
 Ebert, D. S. et al. (2003). Texturing and Modeling: A Procedural Approach, 3rd ed.,
@@ -29,6 +35,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from .lod import OctaveLOD, lod_lipschitz
 from .node import Node, hart_bounds, opaque_float
 from .noise import fbm, fbm_lipschitz, fbm_range
 
@@ -55,10 +62,37 @@ class FbmParams:
         self.lacunarity = opaque_float(lacunarity)
         self.gain = opaque_float(gain)
         self.seed = dr.opaque(mi.UInt32, self.seed_np)
+        self._lod = OctaveLOD(self.octaves, self.lacunarity_np, self.gain_np, self.amplitude_np,
+                              self.wavelength_np)
 
-    def _fbm(self, p, salt=0):
+    def _fbm(self, p, salt=0, level=None):
         return fbm(p * self.inv_wavelength, self.octaves, self.lacunarity, self.gain,
-                   self.seed + salt * 7919)
+                   self.seed + salt * 7919, level)
+
+    def _lod_hart(self, f, levels, L_rest, x, footprint, scale=1.0):
+        """Distance bounds of ``f`` (this node's footprint field at level ``x``), whose
+        Lipschitz bound is ``L_rest`` plus ``scale`` times the truncated noise's
+        (module docstring)."""
+        S, rho = self._lod.slope(x, footprint)
+        loc = dr.rcp(L_rest + scale * S)
+        glob = dr.rcp(L_rest + scale * self._lod.global_slope(footprint))
+        out = []
+        for c in levels:
+            gap = dr.maximum(-f - c, 0.0)
+            out.append(dr.maximum(gap * glob, dr.minimum(rho, gap * loc)))
+        return tuple(out)
+
+    @property
+    def lod_kappa(self) -> float:
+        return max([self._lod.kappa] + [c.lod_kappa for c in self.children])
+
+    def octave_error(self, footprint):
+        """Bound of ``|a fbm_fp - a fbm|``: how far this node's truncated octave sum
+        (one of its fBm fields) is from the full one at ``footprint``, as ``mi.Float``
+        (:meth:`arches_render.field.lod.OctaveLOD.error`; 0 for ``None``). A
+        :class:`Noise` or a :class:`Displace` of an octave-free child is within it of
+        its full field, a :class:`DomainWarp` within ``sqrt(3) L_child`` times it."""
+        return self._lod.error(self._lod.level(footprint))
 
     @property
     def cost(self) -> float:
@@ -88,6 +122,13 @@ class Noise(FbmParams, Node):
     def eval(self, p):
         return self.amplitude * self._fbm(p)
 
+    def eval_bounds(self, p, levels, direction=None, footprint=None):
+        x = self._lod.level(footprint)
+        if x is None:
+            return super().eval_bounds(p, levels, direction)
+        f = self.amplitude * self._fbm(p, 0, x)
+        return f, self._lod_hart(f, levels, 0.0, x, footprint)
+
     def bounds(self):
         return np.full(3, -np.inf), np.full(3, np.inf)
 
@@ -113,16 +154,23 @@ class Displace(FbmParams, Node):
     #: the result is certainly below ``-skip_margin`` (None: never skip).
     skip_margin = None
 
-    def eval_bounds(self, p, levels, direction=None):
-        # {f >= -c} lies inside {f_child >= -c - max_offset}.
-        fc, dc = self.children[0].eval_bounds(p, tuple(c + self.max_offset for c in levels), direction)
+    def eval_bounds(self, p, levels, direction=None, footprint=None):
+        # {f >= -c} lies inside {f_child >= -c - max_offset} (a truncated sum too).
+        child = self.children[0]
+        fc, dc = child.eval_bounds(p, tuple(c + self.max_offset for c in levels), direction, footprint)
+        x = self._lod.level(footprint)
+        lvl = (p, fc) if x is None else (p, fc, x)
         if self.skip_margin is None:
-            f = fc + self.amplitude * self._fbm(p)
+            f = fc + self.amplitude * self._fbm(p, 0, x)
         else:
-            f = dr.if_stmt((p, fc), fc + self.max_offset >= -self.skip_margin,
-                           lambda p, fc: fc + self.amplitude * self._fbm(p),
-                           lambda p, fc: fc + self.max_offset, label="displace_skip")
-        return f, tuple(dr.maximum(a, b) for a, b in zip(dc, hart_bounds(f, levels, self.lipschitz)))
+            f = dr.if_stmt(lvl, fc + self.max_offset >= -self.skip_margin,
+                           lambda p, fc, *x: fc + self.amplitude * self._fbm(p, 0, *x),
+                           lambda p, fc, *x: fc + self.max_offset, label="displace_skip")
+        if x is None:
+            hart = hart_bounds(f, levels, self.lipschitz)
+        else:
+            hart = self._lod_hart(f, levels, lod_lipschitz(child, footprint), x, footprint)
+        return f, tuple(dr.maximum(a, b) for a, b in zip(dc, hart))
 
     def bounds(self):
         lo, hi = self.children[0].bounds()
@@ -147,6 +195,20 @@ class DomainWarp(FbmParams, Node):
     def eval(self, p):
         w = mi.Vector3f(self._fbm(p, 0), self._fbm(p, 1), self._fbm(p, 2))
         return self.children[0].eval(p + self.amplitude * w)
+
+    def eval_bounds(self, p, levels, direction=None, footprint=None):
+        x = self._lod.level(footprint)
+        if x is None:
+            return super().eval_bounds(p, levels, direction)
+        w = mi.Vector3f(self._fbm(p, 0, x), self._fbm(p, 1, x), self._fbm(p, 2, x))
+        # The child's footprint field at the warped point (a culled child may answer
+        # its far value there, below its own: the bound below stays safe).
+        f = self.children[0].eval_bounds(p + self.amplitude * w, (), footprint=footprint)[0]
+        # |grad| <= |J_w| A + s B with the child's A <= L_c, B <= kappa_c L_c (lod.py) and
+        # |J_w| <= 1 + sqrt(3) S_W: L_c (1 + kappa_c s) + sqrt(3) L_c S_W.
+        child = self.children[0]
+        return f, self._lod_hart(f, levels, lod_lipschitz(child, footprint), x, footprint,
+                                 math.sqrt(3.0) * child.lipschitz)
 
     def bounds(self):
         lo, hi = self.children[0].bounds()

@@ -141,22 +141,28 @@ class HeightfieldCaster:
             self._min_cast = dr.opaque(mi.Float, 0.125 * self.far_level)
 
     # -- public queries ------------------------------------------------------------
-    def trace(self, o, d, tmax, active):
-        """First hit of the rays ``o + t d`` (``|d| = 1``) with ``0 <= t <= tmax``.
+    def trace(self, o, d, tmax, active, cone=None):
+        """First hit of the rays ``o + t d`` (``|d| = 1``) with ``0 <= t <= tmax``;
+        ``cone``: each lane's ray cone (:meth:`SphereTracer.trace`), used by the sphere
+        steps near 3-D operands (the heightfield itself has no octaves).
 
         Returns
         -------
         (mi.Bool, mi.Float)
             Hit mask and distance.
         """
-        return self._query(o, d, tmax, active, any_hit=False)
+        return self._query(o, d, tmax, active, any_hit=False, cone=cone)
 
-    def occluded(self, o, d, tmax, active):
+    def occluded(self, o, d, tmax, active, cone=None):
         """Whether the segments ``o + t d``, ``0 <= t <= tmax``, meet matter (stops at
         the first certain hit)."""
-        return self._query(o, d, tmax, active, any_hit=True)[0]
+        return self._query(o, d, tmax, active, any_hit=True, cone=cone)[0]
 
-    def surface(self, p, t, d=None):
+    def tolerance(self, t, cone=None):
+        """Hit tolerance of the sphere steps (:meth:`SphereTracer.tolerance`)."""
+        return self.sphere.tolerance(t, cone)
+
+    def surface(self, p, t, d=None, cone=None):
         """Surface point and outward normal of hits ``p`` found at distance ``t``.
 
         Hybrid trees: the sphere tracer's (gradient of the full field). Otherwise
@@ -166,7 +172,7 @@ class HeightfieldCaster:
         ``min(h - z, box)``.
         """
         if self.hybrid:
-            return self.sphere.surface(p, t, d)
+            return self.sphere.surface(p, t, d, cone)
         h00, h10, h01, h11, fu, fv = self.plan.heightfield.patch(p.x, p.y)
         top = dr.lerp(dr.lerp(h00, h10, fu), dr.lerp(h01, h11, fu), fv) - p.z
         hx = dr.lerp(h10 - h00, h11 - h01, fv) * self._inv_dx
@@ -184,7 +190,7 @@ class HeightfieldCaster:
         return mi.Point3f(p), dr.select(box < top, face, n)
 
     # -- implementation --------------------------------------------------------------
-    def _query(self, o, d, tmax, active, any_hit):
+    def _query(self, o, d, tmax, active, any_hit, cone=None):
         """Ray queries; see the class docstring for the modes of a lane.
 
         CAST traverses the mipmap over ``[t, t_hi]``, a stretch where the root's
@@ -250,8 +256,9 @@ class HeightfieldCaster:
                 near_end = dr.maximum(near_end, dr.select(soon, e1, -inf))
             if bounded:
                 p = o + d * t_seg
+                fp = self.sphere.footprint(cone, t_seg)
                 for node, level in bounded:
-                    cert = dr.minimum(cert, node.eval_bounds(p, (level,), d)[1][0])
+                    cert = dr.minimum(cert, node.eval_bounds(p, (level,), d, fp)[1][0])
             cert = dr.select(misses_zone | (t_seg >= z1), inf, dr.maximum(cert, z0 - t_seg))
             seg_end = dr.minimum(t_seg + cert, t_end)
             return (cert >= min_cast, seg_end, dr.maximum(t_seg, ta), dr.minimum(seg_end, tb),
@@ -261,9 +268,9 @@ class HeightfieldCaster:
             """One over-relaxed sphere step on the full field (as :class:`SphereTracer`,
             with its step budget: a lane that exhausts it is a miss); past ``near_end``,
             a long free step hands the lane back to probing at its verified end."""
-            f, (r,) = self.field.eval_bounds(o + d * t, (0.0,), d)
+            f, (r,) = self.field.eval_bounds(o + d * t, (0.0,), d, self.sphere.footprint(cone, t))
             failed = (omega > 1.0) & (r + r_prev < step)
-            new_hit = ~failed & ((-f < eps * t) | (f >= 0.0))
+            new_hit = ~failed & ((-f < self.sphere.tolerance(t, cone)) | (f >= 0.0))
             leave = alive & ~failed & ~new_hit & (r >= min_cast) & (t >= near_end)
             t_next = dr.select(failed, t_prev + r_prev, dr.minimum(t + omega * r, t_end))
             t_next = dr.select(leave, t + r, t_next)

@@ -39,8 +39,22 @@ fog-free beauty of the same paths (``beauty_clear``) and the camera ray's
 transmittance (``transmittance``) are returned as well. Without an atmosphere
 none of this code is traced: the kernels are those of the fog-free integrator.
 
+Footprint level of detail (``lod = true``, :mod:`arches_render.field.lod`): every
+ray carries a cone ``(r0, s)``, radius ``r0 + s t`` at distance ``t``, and the field is
+traced as that cone's footprint field (octaves finer than the cone skipped) with a
+cone-tracing hit tolerance (:mod:`.sphere_tracer`). Camera rays start with ``r0 = 0``
+and ``s`` = half the pixel's angle (from Mitsuba's ray differentials, which it
+scales by ``1/sqrt(spp)``: the scaling is undone, the cone is the pixel's). At a hit
+the cone's radius there becomes the next rays' ``r0``; shadow rays keep ``s``,
+BSDF-sampled rays widen it by ``lod_bounce_spread`` (a diffuse bounce averages
+light over a wide solid angle, so its ray needs far less detail; Christensen et
+al. 2003 widen diffuse rays' differentials for the same reason) unless the sampled
+lobe is a delta.
+
 References
 ----------
+Christensen, P. H. et al. (2003). Ray differentials and multiresolution geometry
+caching for distribution ray tracing in complex scenes. CGF 22(3).
 Veach, E. (1997). Robust Monte Carlo methods for light transport simulation. PhD
 thesis, Stanford (MIS, power heuristic).
 Jakob, W. et al. (2022). Mitsuba 3 renderer, ``path`` integrator.
@@ -76,7 +90,9 @@ class _ImplicitPathImpl:
     (over-relaxation, 1.6), ``max_steps`` (512), ``aovs`` (false: return the AOVs
     of :mod:`arches_render.render.aovs`), ``heightfield_cast`` (true: ray-cast
     heightfield trees, :mod:`arches_render.render.heightfield_caster`; false:
-    sphere-trace every field, for comparisons).
+    sphere-trace every field, for comparisons), ``lod`` (true: footprint level of
+    detail, see the module docstring), ``lod_bounce_spread`` (0.1 rad: the cone
+    spread a non-delta bounce adds).
     """
 
     def __init__(self, props):
@@ -90,6 +106,8 @@ class _ImplicitPathImpl:
         self.max_steps = int(props.get("max_steps", 512))
         self.aovs = bool(props.get("aovs", False))
         self.heightfield_cast = bool(props.get("heightfield_cast", True))
+        self.lod = bool(props.get("lod", True))
+        self.lod_bounce_spread = float(props.get("lod_bounce_spread", 0.1))
         self.tracer = None
         self.field_bsdf = None
         self.atmosphere = None
@@ -106,14 +124,24 @@ class _ImplicitPathImpl:
         self.atmosphere = atmosphere
 
     # -- ray queries ------------------------------------------------------------
-    def intersect(self, scene, ray, active):
-        """Nearest hit among meshes and the field; returns ``(si, is_field_hit)``."""
+    def camera_cone(self, sampler, ray):
+        """``(r0, s)`` of camera rays (module docstring), or ``None`` without level of detail."""
+        if not self.lod or not getattr(ray, "has_differentials", False):
+            return None
+        # Mitsuba scaled the differentials by 1/sqrt(spp): back to the pixel's size.
+        scale = 0.5 * dr.sqrt(mi.Float(sampler.sample_count()))
+        spread = dr.maximum(dr.norm(ray.d_x - ray.d), dr.norm(ray.d_y - ray.d)) * scale
+        return mi.Float(0.0), mi.Float(spread)
+
+    def intersect(self, scene, ray, active, cone=None):
+        """Nearest hit among meshes and the field; returns ``(si, is_field_hit)``;
+        ``cone``: the rays' cones (module docstring) or None."""
         si = scene.ray_intersect(ray, mi.RayFlags.All, coherent=False, active=active)
         if self.tracer is None:
             return si, mi.Bool(False)
         tmax = dr.select(si.is_valid(), si.t, ray.maxt)
-        hit, t = self.tracer.trace(ray.o, ray.d, tmax, active)
-        p, n = self.tracer.surface(ray.o + ray.d * t, t, ray.d)
+        hit, t = self.tracer.trace(ray.o, ray.d, tmax, active, cone)
+        p, n = self.tracer.surface(ray.o + ray.d * t, t, ray.d, cone)
         # Lift the point off the surface so that rays spawned here start in air: a
         # tenth of the hit tolerance, at least a few float32 ulps of the position (a
         # fixed fraction of the scene's size would be metres on a 1000 km tile).
@@ -129,11 +157,11 @@ class _ImplicitPathImpl:
         si = dr.select(hit, sf, si)
         return si, hit
 
-    def occluded(self, scene, ray, active):
-        """Shadow-ray test against meshes and the field."""
+    def occluded(self, scene, ray, active, cone=None):
+        """Shadow-ray test against meshes and the field (``cone`` as for :meth:`intersect`)."""
         blocked = scene.ray_test(ray, active)
         if self.tracer is not None:
-            blocked |= self.tracer.occluded(ray.o, ray.d, ray.maxt, active & ~blocked)
+            blocked |= self.tracer.occluded(ray.o, ray.d, ray.maxt, active & ~blocked, cone)
         return blocked
 
     def bsdf_at(self, si, ray, field_hit):
@@ -144,6 +172,7 @@ class _ImplicitPathImpl:
     # -- estimator ---------------------------------------------------------------
     def sample(self, scene, sampler, ray, medium=None, active=True):
         bsdf_ctx = mi.BSDFContext()
+        cone0 = self.camera_cone(sampler, ray)  # before the differentials are dropped
         ray = mi.Ray3f(ray)
         ray0, active0 = mi.Ray3f(ray), mi.Bool(active)
         L = mi.Spectrum(0.0)
@@ -158,13 +187,16 @@ class _ImplicitPathImpl:
         atm = self.atmosphere
         # The fog-free radiance and throughput of the same path (AOV beauty_clear).
         clear = (mi.Spectrum(0.0), mi.Spectrum(1.0)) if atm is not None and self.aovs else ()
+        cone = () if cone0 is None else cone0
 
         def cond(*state):
             return state[-1]
 
         def body(ray, L, beta, eta, depth, valid_ray, prev_si, prev_bsdf_pdf, prev_bsdf_delta, clear,
-                 active):
-            si, field_hit = self.intersect(scene, ray, active)
+                 cone, active):
+            si, field_hit = self.intersect(scene, ray, active, cone or None)
+            # The cone at the hit: shadow rays keep its spread, bounces widen it.
+            hit_cone = (cone[0] + cone[1] * dr.select(si.is_valid(), si.t, 0.0), cone[1]) if cone else None
             if clear:
                 L_c, beta_c = clear
             if atm is not None:
@@ -194,7 +226,7 @@ class _ImplicitPathImpl:
             active_em &= ds.pdf != 0.0
             shadow = si.spawn_ray_to(ds.p)
             shadow.maxt = dr.select(ds.delta | (ds.dist < dr.inf), shadow.maxt, dr.inf)
-            active_em &= ~self.occluded(scene, shadow, active_em)
+            active_em &= ~self.occluded(scene, shadow, active_em, hit_cone)
             wo = si.to_local(ds.d)
             bsdf_val, bsdf_pdf = bsdf.eval_pdf(bsdf_ctx, si, wo, active_em)
             mis_em = dr.select(ds.delta, 1.0, mis_weight(ds.pdf, bsdf_pdf))
@@ -216,6 +248,8 @@ class _ImplicitPathImpl:
             prev_si = dr.detach(si)
             prev_bsdf_pdf = bs.pdf
             prev_bsdf_delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
+            if cone:
+                cone = (hit_cone[0], hit_cone[1] + dr.select(prev_bsdf_delta, 0.0, self.lod_bounce_spread))
             depth[si.is_valid()] += 1
 
             # Russian roulette.
@@ -231,22 +265,22 @@ class _ImplicitPathImpl:
             rr_continue = sampler.next_1d() < rr_prob
             active_next &= ~rr_active | rr_continue
             return (ray, L, beta, eta, depth, valid_ray, prev_si, prev_bsdf_pdf, prev_bsdf_delta, clear,
-                    active_next)
+                    cone, active_next)
 
         state = dr.while_loop((ray, L, beta, eta, depth, valid_ray, prev_si, prev_bsdf_pdf,
-                               prev_bsdf_delta, clear, active), cond, body, label="implicit_path")
+                               prev_bsdf_delta, clear, cone, active), cond, body, label="implicit_path")
         L, valid_ray = state[1], state[5]
         if not self.aovs:
             return L, valid_ray, []
-        aovs = self.primary_aovs(scene, ray0, active0)
+        aovs = self.primary_aovs(scene, ray0, active0, cone0)
         if atm is not None:
             L_c = state[9][0]
             aovs += [L_c.x, L_c.y, L_c.z]
         return L, valid_ray, aovs
 
-    def primary_aovs(self, scene, ray, active):
+    def primary_aovs(self, scene, ray, active, cone=None):
         """AOV values of the primary hit, in the order of :meth:`aov_names`."""
-        si, field_hit = self.intersect(scene, ray, active)
+        si, field_hit = self.intersect(scene, ray, active, cone)
         valid = mi.Bool(active) & si.is_valid()
         bsdf = self.bsdf_at(si, ray, field_hit)
         # Perspective cameras start rays on the near plane: measure depth from the

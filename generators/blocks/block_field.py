@@ -411,7 +411,7 @@ class BlockField(Node):
         face = dr.minimum(dr.min(frac), dr.min(1.0 - frac)) / self._winv
         return dr.select(outside > 0.0, -self._m - outside, f), (empty, upper, face)
 
-    def eval_bounds(self, p, levels, direction=None):
+    def eval_bounds(self, p, levels, direction=None, footprint=None):
         """Distances to ``{t >= -c}``: Hart's ``-t / L``; for ``c < m`` also the larger of
         the empty-space distance and ``min(-v_max / L, m - c + face)``, where ``v_max``
         bounds the listed copies and ``face`` is the distance to the world cell's

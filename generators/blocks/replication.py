@@ -157,9 +157,9 @@ class Offset(Node):
     def eval(self, p):
         return self.children[0].eval(p) + self.delta
 
-    def eval_bounds(self, p, levels, direction=None):
+    def eval_bounds(self, p, levels, direction=None, footprint=None):
         # {f + delta >= -c} = {f >= -c - delta}
-        f, ds = self.children[0].eval_bounds(p, tuple(c + self.delta_np for c in levels), direction)
+        f, ds = self.children[0].eval_bounds(p, tuple(c + self.delta_np for c in levels), direction, footprint)
         return f + self.delta, ds
 
     def bounds(self):

@@ -299,7 +299,7 @@ class ConvolutionSurface(Node):
         code, _ = self._coarse.lookup(p)
         return self._value(p, code)
 
-    def eval_bounds(self, p, levels, direction=None):
+    def eval_bounds(self, p, levels, direction=None, footprint=None):
         code, S = self._coarse.lookup(p)
         f = self._value(p, code)
         hart = hart_bounds(f, levels, self.lipschitz)

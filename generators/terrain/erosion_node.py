@@ -88,14 +88,16 @@ class Erosion(Node):
         L = Lf + LD + MD * self.children[2].lipschitz
         return L, self.value_max, (rD if rf is None else dr.minimum(rf, rD))
 
-    def eval_bounds(self, p, levels, direction=None):
-        f, ds = self.children[0].eval_bounds(p, levels, direction)
+    def eval_bounds(self, p, levels, direction=None, footprint=None):
+        f, ds = self.children[0].eval_bounds(p, levels, direction, footprint)
         v = self._erode(p, f)
         local = self.local_lipschitz(p)
+        # The child's footprint field (arches_render.field.lod): slopes grow by 1 + kappa s.
+        grow = 1.0 + self.lod_kappa * footprint.rate if footprint is not None and self.lod_kappa else 1.0
         if local is None:
-            hart = hart_bounds(v, levels, self.lipschitz)
+            hart = hart_bounds(v, levels, self.lipschitz * grow)
         else:
-            hart = local_hart(v, levels, local[0], local[2], self.lipschitz)
+            hart = local_hart(v, levels, local[0] * grow, local[2], self.lipschitz * grow)
         return v, tuple(dr.maximum(d, h) for d, h in zip(ds, hart))
 
     def bounds(self):

@@ -214,7 +214,7 @@ class ImplicitHeightfield(Heightfield):
         fT = sigmoid_dr(self.elevation(p.x, p.y) - p.z, self._R, self._a, self._b)
         return dr.minimum(fT, self._prism(p)[0])
 
-    def eval_bounds(self, p, levels, direction=None):
+    def eval_bounds(self, p, levels, direction=None, footprint=None):
         v = self.elevation(p.x, p.y) - p.z
         fP, dP = self._prism(p)
         f = dr.minimum(sigmoid_dr(v, self._R, self._a, self._b), fP)

@@ -121,7 +121,7 @@ class Sum(Node):
             v = v + c.eval(p)
         return v
 
-    def eval_bounds(self, p, levels, direction=None):
+    def eval_bounds(self, p, levels, direction=None, footprint=None):
         kids = self.children
         sups = [value_max(c) for c in kids]
         # Caps (module docstring): f_j < v_j within rho_j = d_j(-v_j), v_j just above
@@ -152,7 +152,7 @@ class Sum(Node):
         f, answers = None, []
         for child, ask in zip(kids, asks):
             if ask is not None:  # (no levels: a culled child still skips far work)
-                fc, dc = child.eval_bounds(p, tuple(ask), direction)
+                fc, dc = child.eval_bounds(p, tuple(ask), direction, footprint)
             else:
                 fc, dc = child.eval(p), ()
             f = fc if f is None else f + fc
@@ -175,7 +175,12 @@ class Sum(Node):
             Lc, rc = local_lipschitz(child, p)
             L = L + Lc
             r = rc if r is None else (r if rc is None else dr.minimum(r, rc))
-        hart = local_hart(f, levels, L, r, self.lipschitz)
+        L_glob = self.lipschitz
+        if footprint is not None and self.lod_kappa:
+            # Footprint fields (arches_render.field.lod): every slope grows by 1 + kappa s.
+            grow = 1.0 + self.lod_kappa * footprint.rate
+            L, L_glob = L * grow, L_glob * grow
+        hart = local_hart(f, levels, L, r, L_glob)
         return f, tuple(h if d is None else dr.maximum(d, h) for d, h in zip(ds, hart))
 
     def bounds(self):

@@ -67,6 +67,15 @@ surface and its ``D_max`` envelope, where rays graze. The loop runs over *near* 
 least the empty-cell distance; outside the grid, the distance to the box of all
 supports; ``FAR`` above ``value_max``.
 
+Footprint level of detail (:mod:`arches_render.field.lod`): with a footprint the
+star noise keeps the octaves the cone resolves. Its range is at most the full one
+(``D_min``, ``D_max`` hold), the slope of the truncated noise is at most the full one
+and the fade adds ``|grad n| <= L_n' kappa s`` (``s`` the footprint's rate), so
+``|grad D| <= (R A L_n / lambda) (sigma_s + (c + R)/r + kappa s)`` and, with
+``rho <= D_max < 2 (c + R)``, every slope bound above grows by at most the factor
+``1 + 2 kappa s`` (:attr:`lod_kappa`); the geometric level bounds add ``kappa s`` to
+their ``|grad D|`` term.
+
 References
 ----------
 Paris, A. et al. (2019). Terrain amplification with implicit 3D features. ACM TOG
@@ -86,6 +95,7 @@ import mitsuba as mi
 import numpy as np
 
 from arches_render.atomic import atomic_write
+from arches_render.field.lod import OctaveLOD
 from arches_render.npzfile import write_npz
 from arches_render.field.node import Node, box_distance, opaque_float
 from arches_render.field.noise import fbm, fbm_lipschitz, fbm_range
@@ -259,6 +269,8 @@ class SkeletalSet(Node):
             self._inv_wl = opaque_float(1.0 / nz["wavelength"])
             self._lac, self._gain = opaque_float(nz["lacunarity"]), opaque_float(nz["gain"])
             self._seed = dr.opaque(mi.UInt32, int(nz["seed"]) & 0xFFFFFFFF)
+            # Levels of detail of the star noise (amplitude and wavelength of n itself).
+            self._lod = OctaveLOD(nz["octaves"], nz["lacunarity"], nz["gain"], 1.0, nz["wavelength"])
 
     # -- bounds of the math -----------------------------------------------------
     def _prim_lipschitz(self):
@@ -308,6 +320,11 @@ class SkeletalSet(Node):
     def lipschitz(self):
         return max(self._lipschitz, 1e-12)
 
+    @property
+    def lod_kappa(self):
+        # Module docstring, "Footprint level of detail".
+        return 2.0 * self._lod.kappa if self.noise else 0.0
+
     # Zero (minus the threshold) outside the supports: no unit-rate falloff.
     unit_falloff = False
 
@@ -349,10 +366,11 @@ class SkeletalSet(Node):
         iz = mi.UInt32(dr.clip(fz, 0.0, rz - 1.0))
         return (iz * ry + iy) * rx + ix, inside
 
-    def _falloff(self, p, k, geometry=False):
+    def _falloff(self, p, k, geometry=False, level=None):
         """``g(d~)`` of primitive ``k`` at ``p`` (a value in [0, 1]); with ``geometry``,
         ``(g, rho, r, D)``: also ``rho = max(r - c, 0)``, the distance ``r`` to the
-        skeleton and the star radius ``D(p)`` (``D_max`` where the noise is skipped)."""
+        skeleton and the star radius ``D(p)`` (``D_max`` where the noise is skipped).
+        ``level``: the star noise's footprint level (``None``: every octave)."""
         a = mi.Point3f(dr.gather(mi.Float, self._ax, k), dr.gather(mi.Float, self._ay, k),
                        dr.gather(mi.Float, self._az, k))
         ba = mi.Vector3f(dr.gather(mi.Float, self._bax, k), dr.gather(mi.Float, self._bay, k),
@@ -369,22 +387,23 @@ class SkeletalSet(Node):
             g = g_dr(dr.square(rho / R))
             return (g, rho, r, R) if geometry else g
 
-        def noisy(rho, R, core, s, off, r, k):
+        def noisy(rho, R, core, s, off, r, k, *lvl):
             u = off / dr.maximum(r, 1e-12)
             v = s + (core + R) * u
             seed = self._seed + dr.gather(mi.UInt32, self._group, k) * 7919
-            n = fbm(v * self._inv_wl, int(self.noise["octaves"]), self._lac, self._gain, seed)
+            n = fbm(v * self._inv_wl, int(self.noise["octaves"]), self._lac, self._gain, seed, *lvl)
             D = R * (1.0 + self._amp * n)
             return g_dr(dr.square(rho / D)), D
 
-        def far(rho, R, core, s, off, r, k):
+        def far(rho, R, core, s, off, r, k, *lvl):
             return mi.Float(0.0), R * self._reach
 
-        g, D = dr.if_stmt((rho, R, core, s, off, r, k), rho < R * self._reach, noisy, far,
+        lvl = () if level is None else (level,)
+        g, D = dr.if_stmt((rho, R, core, s, off, r, k, *lvl), rho < R * self._reach, noisy, far,
                           label="star_noise")
         return (g, rho, r, D) if geometry else g
 
-    def _level_bound(self, k, e, geometry, u):
+    def _level_bound(self, k, e, geometry, u, rate=None):
         """Lower bound of the distance from ``p`` to ``{F_k >= u}`` (``u > 0``), or
         ``None`` where primitive ``k`` cannot reach ``u`` (module docstring, "Distance
         bounds"): returns ``(acts, bound)``."""
@@ -396,11 +415,14 @@ class SkeletalSet(Node):
             x, acts = 1.0, e > 0.0
         bound = rho - x * dr.gather(mi.Float, self._reach_R, k)  # with D_max
         if self.noise:
-            # With the noise at p: within r/2 of p, |grad D| <= K (sigma_s + 2 (c + R) / r).
-            lip_D = dr.gather(mi.Float, self._noise_K, k) * (
-                dr.gather(mi.Float, self._seg, k) + 2.0 * (dr.gather(mi.Float, self._core, k)
-                                                           + dr.gather(mi.Float, self._R, k))
-                * dr.rcp(dr.maximum(r, 1e-12)))
+            # With the noise at p: within r/2 of p, |grad D| <= K (sigma_s + 2 (c + R) / r)
+            # (+ K kappa s for a footprint's fade, module docstring).
+            spin = dr.gather(mi.Float, self._seg, k) + 2.0 * (dr.gather(mi.Float, self._core, k)
+                                                             + dr.gather(mi.Float, self._R, k)) \
+                * dr.rcp(dr.maximum(r, 1e-12))
+            if rate is not None:
+                spin = spin + self._lod.kappa * rate
+            lip_D = dr.gather(mi.Float, self._noise_K, k) * spin
             local = dr.minimum(0.5 * r, (rho - x * D) * dr.rcp(1.0 + x * lip_D))
             bound = dr.maximum(bound, local)
         return acts, bound
@@ -409,11 +431,14 @@ class SkeletalSet(Node):
         """Combined field ``F(p)`` (before the threshold) as ``mi.Float``."""
         return self._accumulate(p, (self._start, self._count, self._index))[0]
 
-    def _accumulate(self, p, lists, us=()):
+    def _accumulate(self, p, lists, us=(), footprint=None):
         """``(F(p), ds)``: the field over the cell lists ``lists`` (CSR ``start, count,
         index``) and, for each ``u`` of ``us``, the smallest :meth:`_level_bound` over
         them (``FAR`` where none acts). Primitives listed but not touching ``p`` add
-        exactly 0, so the near lists give the same ``F`` as the cell lists."""
+        exactly 0, so the near lists give the same ``F`` as the cell lists. With a
+        ``footprint``, the footprint field (star noise truncated)."""
+        level = self._lod.level(footprint) if self.noise else None
+        rate = footprint.rate if level is not None else None
         start_a, count_a, index_a = lists
         cell, inside = self._cell(p)
         start = dr.gather(mi.UInt32, start_a, cell)
@@ -422,11 +447,11 @@ class SkeletalSet(Node):
         def visit(k, ds):
             e = dr.gather(mi.Float, self._e, k)
             if not us:
-                return e, self._falloff(p, k), ds
-            geometry = self._falloff(p, k, True)
+                return e, self._falloff(p, k, level=level), ds
+            geometry = self._falloff(p, k, True, level)
             out = []
             for u, d in zip(us, ds):
-                acts, bound = self._level_bound(k, e, geometry, u)
+                acts, bound = self._level_bound(k, e, geometry, u, rate)
                 out.append(dr.select(acts, dr.minimum(d, bound), d))
             return e, geometry[0], tuple(out)
 
@@ -468,23 +493,31 @@ class SkeletalSet(Node):
         return (dr.gather(mi.Float, self._cell_L, cell), dr.gather(mi.Float, self._cell_M, cell),
                 self._cell_edge)
 
-    def eval_bounds(self, p, levels, direction=None):
+    def eval_bounds(self, p, levels, direction=None, footprint=None):
         # Local Hart bound: min(r, (-f - c) / L_local) (the ball of radius r has slope
         # <= L_local). Levels below the threshold ({F >= u}, u > 0) add the geometric
         # bounds of the module docstring ("Distance bounds"), from the same loop that
         # evaluates F (over the near lists).
+        if not self.noise:
+            footprint = None
         us = [self._threshold - c for c in levels] if self._near is not None else []
         if us:
-            F, geo = self._accumulate(p, self._near, us)
+            F, geo = self._accumulate(p, self._near, us, footprint)
             f = F - self._threshold
+        elif footprint is not None:
+            f = self._accumulate(p, (self._start, self._count, self._index), (), footprint)[0] - self._threshold
         else:
             f = self.eval(p)
         L, _, r = self.local_lipschitz(p)
-        inv = dr.rcp(dr.maximum(L, 1e-12))
+        L_glob = self.lipschitz
+        if footprint is not None:
+            grow = 1.0 + self.lod_kappa * footprint.rate
+            L, L_glob = L * grow, L_glob * grow
+        inv, inv_glob = dr.rcp(dr.maximum(L, 1e-12)), 1.0 / L_glob
         ds = []
         for c in levels:
             d = dr.minimum(dr.maximum(-f - c, 0.0) * inv, r)
-            ds.append(dr.maximum(d, dr.maximum(-f - c, 0.0) * (1.0 / self.lipschitz)))
+            ds.append(dr.maximum(d, dr.maximum(-f - c, 0.0) * inv_glob))
         if us:
             cell, inside = self._cell(p)
             empty = dr.gather(mi.Float, self._empty, cell)
