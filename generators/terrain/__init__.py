@@ -3,15 +3,17 @@
 A DEM becomes an implicit heightfield; a geology (resistance) tree and erosion
 processes (sea, river, karst, hoodoos, strata) add caves, arches and overhangs as
 skeletal primitive sets; :mod:`.banded` polygonizes such trees in a band around
-the surface (Sec. 7). Entry points: :func:`.amplify.amplify` and the presets of :mod:`.presets`; the
+the surface (Sec. 7); :mod:`.far_field` continues a heightfield tile to the horizon
+(the ``[[far_field]]`` scene table). Entry points: :func:`.amplify.amplify` and the presets of :mod:`.presets`; the
 ``amplify`` command; node types in :mod:`.scene_nodes`.
 """
 
 __all__ = ["NODE_TYPES", "SCENE_TABLES", "COMMANDS", "BENCHMARKS"]
 
 from . import benchmarks, command
+from .far_field import parse_far_field
 from .scene_nodes import NODE_TYPES
 
-SCENE_TABLES: dict = {}
+SCENE_TABLES = {"far_field": parse_far_field}
 COMMANDS = (command,)
 BENCHMARKS = benchmarks.BENCHMARKS

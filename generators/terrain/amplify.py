@@ -3,9 +3,15 @@
 The pipeline of Paris et al. (2019, Fig. 2 and 12) for one *preset*
 (:mod:`.presets`: each preset's geology, landform processes and steps):
 
+0. Analysis (issue 14): ``auto`` picks the preset from the DEM
+   (:func:`.preset_choice.choose_preset`); landform sizes come from its relief in
+   metres (:func:`.preset_choice.landform_scales`); the sea and the lakes from its
+   elevations (:mod:`.water`); the sub-cell detail from its spectrum (:mod:`.detail`).
 1. Implicitization: the DEM becomes an ``implicit_heightfield`` (prism and
-   sigmoid falloff, section 5.1), with falloff ``R = 4`` cells (less on tiny
-   DEMs) and threshold ``T = R / 2``.
+   sigmoid falloff, section 5.1) with fBm octaves continuing its spectrum down to
+   the precision. Falloff ``R = min(4 cells, 2 F)`` (``F`` the landform size; less
+   on tiny DEMs) and threshold ``T = R / 2``: carving energies are relative to
+   ``T``, so ``R`` follows the landforms, not the DEM's cell.
 2. Geology: a resistance tree ``rho`` (section 4) made for the preset: soft layers
    where the landform should form.
 3. Landform generation (section 6) with ``rho``: erosion processes produce
@@ -24,14 +30,20 @@ amplification with implicit 3D features. ACM TOG 38(5).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
-import trimesh
 
+from .detail import default_precision, detail_amplification
+from .preset_choice import choose_preset, landform_scales
 from .presets import PRESETS, SEA_STEPS, Amplification, NodeTables, StepTimer
+from .water import WaterBodies, find_water, water_mesh
 
-__all__ = ["PRESETS", "Amplified", "amplify", "water_mesh"]
+__all__ = ["PRESETS", "PRESET_NAMES", "Amplified", "amplify"]
+
+#: What ``--preset`` accepts: ``auto`` and the presets.
+PRESET_NAMES = ("auto", *PRESETS)
 
 
 @dataclass
@@ -50,14 +62,26 @@ class Amplified:
         ``(x0, y0, x1, y1)`` of the terrain.
     heights : numpy.ndarray
         The DEM as stored (float32 precision).
+    preset : str
+        The preset run (``auto`` resolved).
+    reason : str
+        Why: the rule of :func:`.preset_choice.choose_preset`, or "chosen by the user".
+    scales : dict
+        Landform sizes in metres (:func:`.preset_choice.landform_scales`).
+    precision : float
+        Smallest detail (metres).
+    detail : dict or None
+        The terrain's ``amplification`` table (fBm continuing the DEM's spectrum).
+    water : WaterBodies
+        Sea and lakes.
     focus : numpy.ndarray or None
         ``(K, 3)`` positions of (up to 5000 of) the generated primitives (for the camera).
     sea_level : float or None
-        Water level of the ``sea`` preset.
+        Level of the sea (when the tile has one).
     stats : dict
-        Primitive counts, node count, memory, timings per step.
+        Primitive counts, node count, memory, timings per step, notes.
     water_file : str or None
-        The sea surface mesh (``sea`` preset; relative to the scene file).
+        The water surfaces (relative to the scene file).
     """
 
     tables: dict
@@ -65,48 +89,26 @@ class Amplified:
     root: object
     extent: tuple
     heights: np.ndarray
+    preset: str = ""
+    reason: str = ""
+    scales: dict = field(default_factory=dict)
+    precision: float = 0.1
+    detail: dict | None = None
+    water: WaterBodies | None = None
     focus: np.ndarray | None = None
     sea_level: float | None = None
     stats: dict = field(default_factory=dict)
     water_file: str | None = None
 
-
-def water_mesh(H, extent, level, reach):
-    """Sea surface at ``level`` with holes where the terrain rises above it.
-
-    A plane through the whole tile would cut through the rock, where the implicit
-    terrain's field is saturated (constant, no normal to shade): the water keeps only
-    the grid cells whose four corners are under water, plus four quads reaching
-    ``reach`` metres beyond the tile.
-
-    Returns
-    -------
-    trimesh.Trimesh
-    """
-    ny, nx = H.shape
-    x0, y0, x1, y1 = extent
-    xs, ys = np.linspace(x0, x1, nx), np.linspace(y0, y1, ny)
-    X, Y = np.meshgrid(xs, ys)
-    V = [np.stack([X.ravel(), Y.ravel(), np.full(X.size, level)], 1)]
-    wet = H < level
-    cell_wet = wet[:-1, :-1] & wet[1:, :-1] & wet[:-1, 1:] & wet[1:, 1:]
-    j, i = np.nonzero(cell_wet)
-    a, b, c, d = j * nx + i, j * nx + i + 1, (j + 1) * nx + i, (j + 1) * nx + i + 1
-    F = [np.stack([a, b, d], 1), np.stack([a, d, c], 1)]
-    # Four quads around the tile (corners shared with the tile's outer ring).
-    X0, Y0, X1, Y1 = x0 - reach, y0 - reach, x1 + reach, y1 + reach
-    k = nx * ny
-    V.append(np.array([[X0, Y0, level], [X1, Y0, level], [X1, Y1, level], [X0, Y1, level],
-                       [x0, y0, level], [x1, y0, level], [x1, y1, level], [x0, y1, level]]))
-    outer, inner = k + np.arange(4), k + 4 + np.arange(4)
-    for q in range(4):
-        o0, o1, i0, i1 = outer[q], outer[(q + 1) % 4], inner[q], inner[(q + 1) % 4]
-        F.append(np.array([[o0, o1, i1], [o0, i1, i0]]))
-    return trimesh.Trimesh(np.concatenate(V), np.concatenate(F), process=False)
+    @property
+    def terrain(self):
+        """The ``implicit_heightfield`` node (the DEM), without landforms."""
+        return next(n for n in self.root.walk() if n.kind == "implicit_heightfield")
 
 
 # -- the pipeline ------------------------------------------------------------------------------
-def amplify(heights, cell_size, preset, seed, work_dir, prefix="amplified", progress=None, options=None):
+def amplify(heights, cell_size, preset, seed, work_dir, prefix="amplified", progress=None, options=None,
+            sea_level=0.0, precision=None, detail=True):
     """Build the amplified construction tree of a DEM for a preset.
 
     Parameters
@@ -116,7 +118,7 @@ def amplify(heights, cell_size, preset, seed, work_dir, prefix="amplified", prog
     cell_size : float
         Metres between DEM samples.
     preset : str
-        One of :data:`~.presets.PRESETS`.
+        ``"auto"`` or one of :data:`~.presets.PRESETS`.
     seed : int
         Seed of every random choice (same seed, same tree).
     work_dir : Path
@@ -129,14 +131,21 @@ def amplify(heights, cell_size, preset, seed, work_dir, prefix="amplified", prog
     options : dict, optional
         Overrides of the ``sea`` preset: ``steps`` (number of erosion steps, default
         3) and ``spacing`` (Poisson-disc distance of the samples, metres).
+    sea_level : float or None
+        Sea level (m, default 0): the sea is the cells below it connected to the
+        border (:mod:`.water`); ``None``: no sea. The ``sea`` preset on a DEM with no
+        sea below it puts its sea at the lowest 12 % of the relief (noted).
+    precision : float, optional
+        Smallest detail in metres (default :func:`.detail.default_precision`).
+    detail : bool
+        Add the sub-cell fBm octaves (:mod:`.detail`); ``False``: the DEM alone.
 
     Returns
     -------
     Amplified
     """
-    if preset not in PRESETS:
-        raise ValueError(f"unknown preset {preset!r}; allowed: {', '.join(PRESETS)}")
-    spec = PRESETS[preset]
+    if preset not in PRESET_NAMES:
+        raise ValueError(f"unknown preset {preset!r}; allowed: {', '.join(PRESET_NAMES)}")
     options = dict(options or {})
     sea_steps = int(options.pop("steps", SEA_STEPS))
     sea_spacing = options.pop("spacing", None)
@@ -147,21 +156,48 @@ def amplify(heights, cell_size, preset, seed, work_dir, prefix="amplified", prog
     ny, nx = H.shape
     cell = float(cell_size)
     W, D = (nx - 1) * cell, (ny - 1) * cell
-    extent = (-W / 2, -D / 2, W / 2, D / 2)
-    R = min(4.0 * cell, 0.45 * min(W, D))
-    run = Amplification(NodeTables(work_dir, prefix), H, extent, cell, R, 0.5 * R, rng,
-                        sea_steps=sea_steps, sea_spacing=sea_spacing)
-    zlo, zhi, Z = run.relief
+    extent = (-W / 2, -D / 2, W / 2, D / 2)  # centred: float32 keeps its precision at the corners
+    precision = float(precision) if precision else default_precision(cell)
+    notes = []
+    level = 0.0 if sea_level is None else float(sea_level)
+    if preset == "auto":
+        preset, reason, _ = choose_preset(H, cell, level)
+    else:
+        reason = "chosen by the user"
+    spec = PRESETS[preset]
+    zlo, zhi = float(H.min()), float(H.max())
     flat = zhi - zlo < 0.5 * cell  # no cliff, valley, sink or talus: the processes have nothing to act on
+    water = find_water(H, sea_level, lakes=preset != "karst")  # dolines drain underground
+    if preset == "sea" and water.sea_level is None:
+        fallback = zlo - cell if flat else zlo + 0.12 * max(zhi - zlo, 4 * cell)
+        notes.append(f"no sea below {level:g} m: the sea preset sets its sea at {fallback:.4g} m "
+                     f"(lowest 12 % of the relief; --sea-level to choose)")
+        level = fallback
+        water = find_water(H, level, lakes=True)
+        if water.sea_level is None:  # a closed basin: its floor is not at the border
+            water = WaterBodies(np.where(H <= level, level, np.nan), H <= level, level, water.lakes)
+    scales = landform_scales(H, cell, preset, level) if not flat else {}
+    feature = max(float(scales.get("feature_m", 4 * cell)), 2.0 * precision)
+    R = min(4.0 * cell, 2.0 * feature, 0.45 * min(W, D))
+    run = Amplification(NodeTables(work_dir, prefix), H, extent, cell, R, 0.5 * R, rng, scales=scales,
+                        precision=precision, sea_steps=sea_steps, sea_spacing=sea_spacing)
     run.timer = StepTimer(["implicitization", "geology", *([] if flat else spec.steps(run)), "construction tree"],
                           progress)
     tree = run.tree
     rel = tree.file("heights.npy", lambda p: np.save(p, H.astype(np.float32)))
-    run.terrain = tree.add("terrain", {"type": "implicit_heightfield", "extent": [float(v) for v in extent],
-                                       "source": "file", "file": rel, "R": float(R), "T": float(run.T)})
+    table = {"type": "implicit_heightfield", "extent": [float(v) for v in extent], "source": "file", "file": rel,
+             "R": float(R), "T": float(run.T)}
+    amp, fit = (detail_amplification(H, cell, precision, seed=int(rng.integers(2 ** 31))) if detail
+                else (None, {}))
+    if amp is not None:
+        # Detail fades out before the seam where the far field's frame takes over (see .far_field).
+        amp.update(border=float(R + 1.01 * cell), taper=float(min(4.0 * cell, 0.2 * min(W, D))))
+        table["amplification"] = amp
+    run.terrain = tree.add("terrain", table)
     run.timer.step("implicitization")
     if preset == "sea":
-        run.sea_level = zlo - cell if flat else (0.0 if zlo < 0.0 < zhi else zlo + 0.12 * Z)
+        # A flat DEM under the fallback level has no wet cell: the sea still has its level.
+        run.sea_level = water.sea_level if water.sea_level is not None else level
     run.rho = spec.resistance(run)
     run.timer.step("geology")
 
@@ -179,11 +215,14 @@ def amplify(heights, cell_size, preset, seed, work_dir, prefix="amplified", prog
     focus_pts = run.focus
     focus = np.concatenate(focus_pts)[::max(1, sum(len(f) for f in focus_pts) // 5000)] if focus_pts else None
     stats = run.stats
+    if "sparse_note" in stats:
+        notes.append(stats.pop("sparse_note"))
     stats.update(nodes=int(root.count()), memory_bytes=int(root.tree_nbytes()),
                  primitives=int(sum(v for k, v in stats.items() if k.endswith("primitives"))),
-                 timings_s=run.timer.timings)
-    result = Amplified(tree.tables, tree.files, root, extent, H, focus, run.sea_level, stats)
-    if run.sea_level is not None:
-        reach = 50.0 * max(W, D)
-        result.water_file = tree.file("water.ply", lambda p: water_mesh(H, extent, run.sea_level, reach).export(p))
+                 timings_s=run.timer.timings, notes=notes, detail_fit=fit)
+    result = Amplified(tree.tables, tree.files, root, extent, H, preset, reason, scales, precision, amp, water,
+                       focus, water.sea_level, stats)
+    mesh = water_mesh(water, extent, sea_reach_cells=int(math.ceil(2.5 * feature / cell)) + 1)
+    if mesh is not None:
+        result.water_file = tree.file("water.ply", lambda p: mesh.export(p))
     return result

@@ -2,22 +2,36 @@
 
 Reads a DEM (``.npy``, 16-bit ``.png``, GeoTIFF ``.tif``; see
 :mod:`arches_render.field.heightmaps`), builds the construction tree of a
-preset (:mod:`.amplify`) and writes a scene that
-renders as it is: the ``[nodes.*]`` of the tree, the heights (``.npy``) and the
-primitive arrays (``.npz``) beside it (or under ``--data-dir``), a camera framed on
-the terrain, sun and sky, and the triplanar ``terrain`` material fitted to the
-DEM's elevations. The data files go first and the scene file last, each written
-atomically, so a reader never sees a scene whose data is missing or half written.
+preset (:mod:`.amplify`) and writes a scene that renders as it is: the
+``[nodes.*]`` of the tree, the heights (``.npy``), the primitive arrays (``.npz``)
+and the water (``.ply``) beside it (or under ``--data-dir``), named cameras
+(close shots of the landforms first, then ``overview``: :mod:`.shots`), sun and
+sky, the far field to the horizon (:mod:`.far_field`) and the triplanar
+``terrain`` material fitted to the DEM's elevations. The data files go first and
+the scene file last, each written atomically, so a reader never sees a scene whose
+data is missing or half written; bad input exits 2 with one line and writes nothing.
 
 Options: ``--cell-size`` metres between samples (default 1), ``--height-scale``
 (multiplies the heights; PNG samples are read as [0, 1], so their default is a
-relief of a quarter of the tile's width), ``--preset`` (sea, river, karst,
-hoodoos, strata), ``--seed``, ``--max-cells`` (larger DEMs are block-averaged
-down to it), ``--data-dir`` (relative to the scene's folder), ``-q``.
+relief of a quarter of the tile's width), ``--preset`` (``auto``, the default,
+picks from the DEM: :func:`.preset_choice.choose_preset`; or sea, river, karst,
+hoodoos, strata), ``--sea-level`` (metres, default 0), ``--precision`` (smallest
+detail in metres; default 10 cm for DEMs of 2 m cells or finer, cell / 16
+otherwise), ``--seed``, ``--max-cells`` (larger DEMs are block-averaged down to it,
+default 8192^2: the reduction is printed and written in the scene's header; at 8192^2
+the implicit heightfield alone holds 1.3 GB, heights and maximum mipmaps, 2.6 GB peak),
+``--data-dir`` (relative to the scene's folder), ``-q``.
+
+Limits (exit 2, one line naming the file): at least 3 samples a side, sides at
+most :data:`MAX_ASPECT` times longer than the other (the polygonizer's default
+voxel is a 256th of the longer side: a narrower strip has no voxel across), and
+heights within ``+-MAX_HEIGHT`` metres after scaling (float32 keeps a millimetre
+at 1e4 m and a metre at 1e7 m; beyond, the field's squares overflow).
 """
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 
@@ -26,14 +40,30 @@ import numpy as np
 from arches_render.atomic import atomic_write, temp_dir
 from arches_render.commands import Progress, UsageError, bounded_int, positive_float, writable_output
 from arches_render.field.heightmaps import DEMError, read_dem
-from arches_render.scene.nodes import NodeBuilder
 
-from .amplify import amplify
+from .amplify import PRESET_NAMES, amplify
 from .presets import PRESETS
-from .scene_writer import frame_camera, landscape_material, sun_for, toml_text
+from .scene_writer import scene_document, toml_text
 
 #: Default largest DEM processed (cells); larger ones are averaged down.
-MAX_CELLS = 1024 * 1024
+MAX_CELLS = 8192 * 8192
+#: Longest side / shortest side of a DEM.
+MAX_ASPECT = 64
+#: Largest absolute height after scaling (metres).
+MAX_HEIGHT = 1e7
+
+
+def _finite_float(name):
+    def parse(text):
+        import argparse
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be a number of metres (got {text!r})") from None
+        if not math.isfinite(v) or abs(v) > MAX_HEIGHT:
+            raise argparse.ArgumentTypeError(f"{name} must be a finite number within +-{MAX_HEIGHT:g} m (got {text})")
+        return v
+    return parse
 
 
 def register(subparsers):
@@ -47,9 +77,13 @@ def register(subparsers):
                    help="metres between DEM samples (default 1)")
     p.add_argument("--height-scale", type=positive_float("--height-scale"), default=None,
                    help="multiply the heights (default 1; for PNG, a relief of 1/4 of the tile width)")
-    p.add_argument("--preset", choices=sorted(PRESETS), default="sea",
-                   help="landforms to generate (default sea): " +
+    p.add_argument("--preset", choices=PRESET_NAMES, default="auto",
+                   help="landforms to generate (default auto: chosen from the DEM); " +
                         "; ".join(f"{k}: {v.description}" for k, v in PRESETS.items()))
+    p.add_argument("--sea-level", type=_finite_float("--sea-level"), default=0.0,
+                   help="sea level in metres (default 0): the sea is the cells below it that reach the border")
+    p.add_argument("--precision", type=positive_float("--precision"), default=None,
+                   help="smallest detail in metres (default 0.1 for DEMs of 2 m cells or finer, cell/16 otherwise)")
     p.add_argument("--seed", type=bounded_int("--seed", 0, 2 ** 31 - 1), default=0, help="random seed (default 0)")
     p.add_argument("--max-cells", type=bounded_int("--max-cells", 4, 16384 ** 2), default=MAX_CELLS,
                    help=f"larger DEMs are block-averaged down to this many cells (default {MAX_CELLS})")
@@ -60,43 +94,26 @@ def register(subparsers):
     p.set_defaults(func=run)
 
 
-def _geology(result, base, zhi):
-    """The built geology node (the material's strata read it) and the rock's volume."""
-    if "geology" not in result.tables:
-        return None, None
-    node = NodeBuilder({"geology": result.tables["geology"]}, Path("geology.toml"), Path(".")).named("geology")
-    x0, y0, x1, y1 = result.extent
-    return node, (np.array([x0, y0, base]), np.array([x1, y1, zhi]))
-
-
-def _scene_doc(result, name):
-    H, extent = result.heights, result.extent
-    base = min(float(n.bounds()[0][2]) for n in result.root.walk() if n.kind == "implicit_heightfield")
-    zlo, zhi = float(H.min()), float(H.max())
-    cam = frame_camera(H, extent, result.focus, elevation=PRESETS[result.stats["preset"]].camera_elevation)
-    x0, y0, x1, y1 = extent
-    size = max(x1 - x0, y1 - y0)
-    stats = result.stats
-    doc = {
-        "scene": {"name": name,
-                  "description": f"DEM amplified with the '{stats['preset']}' preset (seed {stats['seed']}): "
-                                 f"{stats['nodes']} nodes, {stats['primitives']} primitives"},
-        "render": {"resolution": [640, 360], "spp": 32, "max_depth": 3},
-        "camera": {"origin": cam["origin"], "target": cam["target"], "fov": cam["fov"]},
-        "lights": [sun_for(cam)],
-        "materials": {"landscape": landscape_material(zlo, zhi, result.sea_level, *_geology(result, base, zhi),
-                                                      preset=stats["preset"], cell=stats["cell_size"])},
-        # The far ground plane lies under the terrain's prism: inside the solid the implicit
-        # field is constant (no gradient, no normal) and a surface there would shade as NaN.
-        "meshes": [{"shape": "disk", "translate": [0.5 * (x0 + x1), 0.5 * (y0 + y1), base - 0.01 * (zhi - zlo) - 0.05],
-                    "scale": 50.0 * size, "material": "landscape"}],
-        "field": {"root": "world", "material": "landscape"},
-        "nodes": result.tables,
-    }
-    if result.sea_level is not None:
-        doc["materials"]["water"] = {"type": "diffuse", "color": [0.03, 0.09, 0.12]}
-        doc["meshes"].append({"file": result.water_file, "material": "water"})
-    return doc
+def _checked_heights(args, dem):
+    """Scaled heights and their cell, or a UsageError naming the file and the limit."""
+    H = dem.heights
+    ny, nx = H.shape
+    if min(nx, ny) < 3:
+        raise UsageError(f"{args.dem}: {nx}x{ny} samples; amplify needs at least 3x3")
+    if max(nx, ny) > MAX_ASPECT * (min(nx, ny) - 1) + 1:
+        raise UsageError(f"{args.dem}: {nx}x{ny} samples; a side may be at most {MAX_ASPECT} times longer than "
+                         f"the other (crop the DEM into tiles)")
+    cell = args.cell_size * dem.step
+    scale = args.height_scale
+    if scale is None:
+        scale = 0.25 * cell * (max(H.shape) - 1) if dem.normalised else 1.0
+    with np.errstate(over="ignore", invalid="ignore"):
+        H = H * scale
+        big = float(np.max(np.abs(H)))
+    if not math.isfinite(big) or big > MAX_HEIGHT or not np.all(np.isfinite(H.astype(np.float32))):
+        raise UsageError(f"{args.dem}: heights reach {big:.3g} m after scaling by {scale:g}; "
+                         f"amplify accepts heights within +-{MAX_HEIGHT:g} m")
+    return H, cell
 
 
 def run(args) -> int:
@@ -111,40 +128,41 @@ def run(args) -> int:
         dem = read_dem(args.dem, max_samples=args.max_cells)
     except DEMError as exc:
         raise UsageError(f"{args.dem}: {exc}" if str(args.dem) not in str(exc) else str(exc)) from None
-    H = dem.heights
-    cell = args.cell_size * dem.step
-    scale = args.height_scale
-    if scale is None:
-        scale = 0.25 * cell * (max(H.shape) - 1) if dem.normalised else 1.0
-    H = H * scale
-    for note in dem.notes:
+    H, cell = _checked_heights(args, dem)
+    # A reduction changes what the DEM resolves: say so in one line, with the way to keep more.
+    notes = [f"{n}; the cell is now {cell:g} m (--max-cells {args.max_cells}; a larger value keeps more)"
+             if n.startswith("reduced") else n for n in dem.notes]
+    for note in notes:
         print(f"arches-render amplify: {args.dem}: {note}", flush=True)
-    if min(H.shape) < 3:
-        raise UsageError(f"{args.dem}: {H.shape[1]}x{H.shape[0]} samples; amplify needs at least 3x3")
 
     bar = Progress(f"amplify {args.preset}", "step", args.quiet)
     prefix = (data_dir / out.stem).as_posix()
     # The work folder's name carries this process's id: one left by a kill is swept by the next run.
     with temp_dir(out.parent, out.stem) as work:
-        result = amplify(H, cell, args.preset, args.seed, work, prefix,
+        result = amplify(H, cell, args.preset, args.seed, work, prefix, sea_level=args.sea_level,
+                         precision=args.precision,
                          progress=lambda done, total, label: (bar.bar.set_postfix_str(label), bar(done, total)))
         bar.close()
+        print(f"arches-render amplify: preset {result.preset} ({result.reason})", flush=True)
+        shots_bar = Progress("shots", "landform", args.quiet)
+        doc, lines = scene_document(result, out.stem, work, progress=shots_bar)
+        shots_bar.close()
         # Publish the data files (atomic renames within one folder tree), then the scene.
         for rel in result.files:
             dest = out.parent / rel
             dest.parent.mkdir(parents=True, exist_ok=True)
             os.replace(work / rel, dest)
-        header = (f"Generated by: arches-render amplify {Path(args.dem).name} --preset {args.preset} "
-                  f"--seed {args.seed} --cell-size {args.cell_size:g}\n"
-                  f"Terrain amplification (Paris et al. 2019): {result.stats['nodes']} nodes, "
-                  f"{result.stats['primitives']} primitives, {result.stats['memory_bytes'] / 1e6:.2f} MB")
-        text = toml_text(_scene_doc(result, out.stem), header)
+        header = "\n".join([f"Generated by: arches-render amplify {Path(args.dem).name} --preset {args.preset} "
+                            f"--seed {args.seed} --cell-size {args.cell_size:g} --sea-level {args.sea_level:g}"]
+                           + [f"DEM: {note}" for note in notes] + lines)
+        text = toml_text(doc, header)
         with atomic_write(out, "w", encoding="utf-8") as f:
             f.write(text)
     bar.close()
     st = result.stats
-    if "note" in st:
-        print(f"arches-render amplify: {args.dem}: {st['note']}", flush=True)
+    for note in ([st["note"]] if "note" in st else []) + st.get("notes", []):
+        print(f"arches-render amplify: {args.dem}: {note}", flush=True)
     print(f"arches-render amplify: wrote {out} ({st['nodes']} nodes, {st['primitives']} primitives, "
-          f"{st['memory_bytes'] / 1e6:.2f} MB; heights {H.shape[1]}x{H.shape[0]} at {cell:g} m)", flush=True)
+          f"{st['memory_bytes'] / 1e6:.2f} MB; heights {H.shape[1]}x{H.shape[0]} at {cell:g} m; "
+          f"{len(doc['cameras'])} cameras: {', '.join(doc['cameras'])})", flush=True)
     return 0

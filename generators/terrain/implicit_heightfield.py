@@ -4,7 +4,13 @@ Elevation. ``h(x, y)`` is the bilinear interpolant of a DEM grid (the lookup of
 :class:`arches_render.field.Heightfield`, which this class extends), plus optional
 *elevation primitives* with compact falloff and an optional fBm *amplification*:
 
-    h(x, y) = H(x, y) + sum_i h_i g(|(x, y) - c_i| / R_i) + a fbm((x, y, 0) / lambda).
+    h(x, y) = H(x, y) + sum_i h_i g(|(x, y) - c_i| / R_i) + w(x, y) a fbm((x, y, 0) / lambda).
+
+The fBm is the sub-cell detail of :mod:`.detail` (its octaves continue the DEM's
+spectrum). ``w`` fades it out towards the tile's border: with ``e`` the distance to
+the nearest side of ``Omega``, ``w = smoothstep((e - border) / taper)`` (``w = 1``
+everywhere when ``taper = 0``), so that the surface meets the far field's frame
+(:mod:`.far_field`), which holds the DEM alone, without a step.
 
 The elevation primitives are a :class:`~.skeletal_set.SkeletalSet` of points in the
 plane ``z = 0`` (so thousands of them stay one grid lookup), evaluated at ``(x, y, 0)``.
@@ -38,7 +44,9 @@ blending with energies need. Both share the DEM lookup, the slope bound and the
 maximum-mipmap tables.
 
 Lipschitz bound: ``L_h = sqrt(1 + S^2)`` with ``S`` the slope bound of ``h`` (grid slope
-bound of the parent + the elevation primitives' bound + the fBm's), so
+bound of the parent + the elevation primitives' bound + the fBm's; with the fade,
+``|grad (w a fbm)| <= a L_fbm / lambda + 1.5 a N_fbm / taper``, ``N_fbm`` the fBm's
+range bound), so
 ``L = max(S_SIGMA L_h, 2 T G_SLOPE / R)``.
 
 Distance bounds (``eval_bounds``, level ``c``): ``{f >= -c}`` is inside both
@@ -98,7 +106,8 @@ class ImplicitHeightfield(Heightfield):
         Elevation primitives: ``center (N, 2)``, ``radius (N,)``, ``height (N,)``.
     amplification : dict, optional
         fBm added to the elevation: ``amplitude``, ``wavelength``, ``octaves`` (4),
-        ``lacunarity`` (2), ``gain`` (0.5), ``seed`` (0).
+        ``lacunarity`` (2), ``gain`` (0.5), ``seed`` (0), ``border`` (0) and
+        ``taper`` (0, no fade) in metres (see the module docstring).
     """
 
     kind = "implicit_heightfield"
@@ -129,15 +138,20 @@ class ImplicitHeightfield(Heightfield):
             extra_slope += self.bumps.lipschitz
         self.amp = None
         if amplification is not None:
-            p = dict(octaves=4, lacunarity=2.0, gain=0.5, seed=0)
+            p = dict(octaves=4, lacunarity=2.0, gain=0.5, seed=0, border=0.0, taper=0.0)
             p.update(amplification)
             if not p["wavelength"] > 0 or not 1 <= int(p["octaves"]) <= 12:
                 raise ValueError("amplification needs wavelength > 0 and octaves in [1, 12]")
+            if not (p["border"] >= 0 and p["taper"] >= 0):
+                raise ValueError("amplification needs border >= 0 and taper >= 0")
             self.amp = p
             rng = abs(p["amplitude"]) * fbm_range(int(p["octaves"]), p["gain"])
             extra_hi, extra_lo = extra_hi + rng, extra_lo - rng
             extra_slope += abs(p["amplitude"]) * fbm_lipschitz(int(p["octaves"]), p["lacunarity"],
                                                                p["gain"]) / p["wavelength"]
+            if p["taper"] > 0:
+                extra_slope += 1.5 * rng / p["taper"]  # |smoothstep'| <= 1.5, |grad e| <= 1
+                self._amp_border, self._amp_inv_taper = opaque_float(p["border"]), opaque_float(1.0 / p["taper"])
             self._amp_a = opaque_float(p["amplitude"])
             self._amp_inv_wl = opaque_float(1.0 / p["wavelength"])
             self._amp_lac, self._amp_gain = opaque_float(p["lacunarity"]), opaque_float(p["gain"])
@@ -151,6 +165,7 @@ class ImplicitHeightfield(Heightfield):
         if not base < hmax:
             raise ValueError(f"base ({base:g}) must lie below the highest elevation ({hmax:g})")
         super().__init__(H, (x0, y0, x1, y1), base=base)
+        self._x1, self._y1 = opaque_float(x1), opaque_float(y1)
         self.grid_slope = self.slope_bound
         self.slope_bound = self.grid_slope + extra_slope
         self.top_np = hmax
@@ -173,8 +188,12 @@ class ImplicitHeightfield(Heightfield):
             h = h + self.bumps.field(mi.Point3f(x, y, 0.0))
         if self.amp is not None:
             q = mi.Point3f(x, y, 0.0) * self._amp_inv_wl
-            h = h + self._amp_a * fbm(q, int(self.amp["octaves"]), self._amp_lac, self._amp_gain,
-                                      self._amp_seed)
+            a = self._amp_a
+            if self.amp["taper"] > 0:
+                e = dr.minimum(dr.minimum(x - self._x0, self._x1 - x), dr.minimum(y - self._y0, self._y1 - y))
+                u = dr.clip((e - self._amp_border) * self._amp_inv_taper, 0.0, 1.0)
+                a = a * (u * u * (3.0 - 2.0 * u))
+            h = h + a * fbm(q, int(self.amp["octaves"]), self._amp_lac, self._amp_gain, self._amp_seed)
         return h
 
     def elevation_np(self, x, y) -> np.ndarray:

@@ -68,7 +68,7 @@ import numpy as np
 
 from .hydrology import fill_depressions, flow_accumulation
 
-__all__ = ["ANALYSIS_CELLS", "analysis_grid", "terrain_stats", "choose_preset", "landform_scales"]
+__all__ = ["ANALYSIS_CELLS", "analysis_grid", "sea_mask", "terrain_stats", "choose_preset", "landform_scales"]
 
 #: Samples along the longer side of the analysis grid.
 ANALYSIS_CELLS = 256
@@ -112,8 +112,20 @@ def analysis_grid(heights, cell_size, cells=ANALYSIS_CELLS):
     return ndimage.map_coordinates(G, [J, I], order=1, mode="nearest"), a
 
 
-def _sea_mask(H, sea_level):
-    """Cells at or below ``sea_level`` connected to the border (8-neighbours)."""
+def sea_mask(H, sea_level):
+    """Cells at or below ``sea_level`` connected to the tile's border (8-neighbours).
+
+    Parameters
+    ----------
+    H : numpy.ndarray
+        ``(ny, nx)`` elevations (m).
+    sea_level : float
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(ny, nx)`` bool.
+    """
     from scipy import ndimage
     wet = H <= sea_level
     lab, n = ndimage.label(wet, structure=np.ones((3, 3), bool))
@@ -153,7 +165,7 @@ def _analyse(heights, cell_size, sea_level):
     H, a = analysis_grid(heights, cell_size)
     ny, nx = H.shape
     L = (max(nx, ny) - 1) * a
-    sea = _sea_mask(H, sea_level)
+    sea = sea_mask(H, sea_level)
     border = np.concatenate([sea[0], sea[-1], sea[1:-1, 0], sea[1:-1, -1]])
     land = ~sea if (~sea).any() else np.ones_like(sea)  # an all-sea tile: measure its floor
     st = dict(analysis_cell_m=a, extent_m=L, sea_fraction=float(sea.mean()),

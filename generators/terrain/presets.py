@@ -7,23 +7,40 @@ landform function reports, side by side in :data:`PRESETS`.
 :func:`.amplify.amplify` runs them on an :class:`Amplification`, whose
 :class:`StepTimer` checks each reported step against the preset's list.
 
-Presets (lengths in DEM cells ``c`` and relief ``Z``):
+Landform sizes are metres, never DEM cells (issue 14): the same place from a 90 m
+and from a 1 m DEM gets caves of the same size. They come from
+:func:`.preset_choice.landform_scales`, measured on an analysis grid whose cell
+follows the tile's extent: the feature size ``F`` (``feature_m``: sea caves 0.2 x the
+coastal cliff ``C``, river undercuts 0.25 x the valley depth, karst tunnels a quarter
+of a stratum, hoodoos 0.6 x the cliff; at least twice the precision ``p``), the
+relief ``Z``, the valley depth, the cliff height and the strata thickness ``S``. DEM
+cells ``c`` only say what the DEM resolves (a headland must be two cells wide to
+be seen). A run makes at most :data:`MAX_PRIMITIVES` primitives per process: on
+a large tile the Poisson spacing grows until the expected count fits (the sizes
+stay), and the note says so.
 
-``sea``      Sea level at 0 when the DEM crosses it, else ``min + 0.12 Z``; a soft
-             stratum at sea level and soft spots on the coast; three steps of sea
-             erosion (section 6.1, Fig. 11), the second on the mesh of the terrain
-             carved by the first, so caves deepen and thin headlands are pierced
-             into arches. A water plane at sea level.
+``sea``      Sea level ``--sea-level`` (0); a soft stratum ``max(1.5 F, 0.2 C)`` thick at
+             sea level and soft spots on the coast; three steps of sea erosion
+             (section 6.1, Fig. 11) on the cliffs (faces steeper than 30 deg, or than
+             ``atan(C / 3 c)`` on coarse DEMs) over a sea range
+             ``max(F, 0.2 C)`` (the paper: 8 m on ~40 m cliffs), cavities up to
+             ``0.8 F``, the second step on the
+             mesh of the terrain carved by the first, so caves deepen and thin
+             headlands are pierced into arches.
 ``river``    Stream power ``A^1/2 s`` on the filled DEM, riverbed and banks; walls
-             carved up to ``max(4 c, Z / 4)`` above the water, more in the soft
-             strata of a layered geology: undercut canyon walls (Fig. 15, 23).
+             carved on the walls (>= 30 deg) up to half the valley depth (at least
+             ``F``) above the water, its stress spread over the floor (0.6 x the
+             valley width), more in the soft strata (``S`` apart) of a layered geology:
+             undercut canyon walls (Fig. 15, 23).
 ``karst``    Invasion percolation from the deepest sinks through two soft
-             horizontal strata (section 6.2, Fig. 14, 17): tunnel segments.
+             horizontal strata (section 6.2, Fig. 14, 17): tunnels of radius ``F``
+             on a lattice of ``1.8 F``.
 ``hoodoos``  Placement by slope and drainage area, open grammar driven by
-             alternating hard and soft strata (section 6.3, Fig. 18-20).
+             alternating hard and soft strata one symbol (``F / 3``) thick
+             (section 6.3, Fig. 18-20).
 ``strata``   The erosion node ``f - f_D (1 - rho)`` (section 6) over the steep
-             faces, with folded and faulted strata: layered cliffs with overhangs
-             (Fig. 4, 10).
+             faces, with folded and faulted strata ``min(S, cliff / 2)`` apart:
+             layered cliffs with overhangs (Fig. 4, 10).
 
 Carving energies. A carving primitive of falloff ``R_i`` and energy ``-e_i`` in rock
 of field value ``T`` removes the ball where ``e_i g(d / R_i) > T``. Each erosion
@@ -65,10 +82,12 @@ from .sea_erosion import sea_erosion_step
 from .shallow_erosion import ErosionPrimitives, sample_mesh
 from .skeletal_set import save_npz
 
-__all__ = ["PRESETS", "Preset", "Amplification", "NodeTables", "StepTimer", "SEA_STEPS"]
+__all__ = ["PRESETS", "Preset", "Amplification", "NodeTables", "StepTimer", "SEA_STEPS", "MAX_PRIMITIVES"]
 
 _CAVITY_AT = 0.6  # cavity radius / falloff radius of a carving primitive
 SEA_STEPS = 3  # steps of sea erosion, as in the paper's Fig. 11
+#: Most primitives one run makes (the paper's largest tree, Fig. 17, has 165,773).
+MAX_PRIMITIVES = 250_000
 
 
 class StepTimer:
@@ -153,6 +172,8 @@ class Amplification:
     R: float
     T: float
     rng: np.random.Generator
+    scales: dict = field(default_factory=dict)
+    precision: float = 0.1
     terrain: object = None
     timer: StepTimer | None = None
     sea_steps: int = SEA_STEPS
@@ -183,8 +204,26 @@ class Amplification:
 
     @property
     def feature(self) -> float:
-        """Cavity scale: a fifth of the relief, at least 3 cells, at most 30."""
-        return float(np.clip(0.2 * self.relief[2], 3.0 * self.cell, 30.0 * self.cell))
+        """Landform size ``F`` in metres (:func:`.preset_choice.landform_scales`), at least 2 precisions."""
+        return max(float(self.scales.get("feature_m", 0.2 * self.relief[2])), 2.0 * self.precision)
+
+    def scale(self, key, default):
+        """A landform size of :attr:`scales` (metres), ``default`` where it is 0 or missing."""
+        v = float(self.scales.get(key, 0.0))
+        return v if v > 0 else float(default)
+
+    def spacing_for(self, area, spacing, per_sample=1.0):
+        """Poisson spacing for ``area`` m^2 so that the expected count stays under :data:`MAX_PRIMITIVES`.
+
+        ``per_sample``: primitives a sample makes. A larger spacing is noted in ``stats``.
+        """
+        need = per_sample * float(area) / float(spacing) ** 2
+        if need <= MAX_PRIMITIVES:
+            return float(spacing)
+        wider = float(spacing) * math.sqrt(need / MAX_PRIMITIVES)
+        self.stats["sparse_note"] = (f"Poisson spacing widened from {spacing:.3g} m to {wider:.3g} m "
+                                     f"(at most {MAX_PRIMITIVES} primitives)")
+        return wider
 
     def carve(self, name, arrays):
         """Write ``arrays`` (one dict or a list merged into one set) as a ``skeletal_set`` node.
@@ -204,8 +243,8 @@ class Amplification:
 
     def carving_arrays(self, prims: ErosionPrimitives):
         """Arrays ``a, b, radius, energy`` of negative primitives carving the cavities of ``prims``."""
-        cell, T = self.cell, self.T
-        keep = prims.radius >= 0.25 * cell  # smaller cavities are below the DEM's resolution
+        T = self.T
+        keep = prims.radius >= self.precision  # smaller cavities are below the precision
         a, b, r = prims.center[keep], prims.end[keep], prims.radius[keep]
         if len(r) == 0:
             return None
@@ -227,10 +266,22 @@ class Amplification:
             self.focus.append(out[2])
 
 
-def _karst_sizes(cell, Z):
-    """Tunnel radius and percolation lattice spacing of the karst preset."""
-    tunnel = max(1.6 * cell, 0.3 * float(np.clip(0.2 * Z, 3.0 * cell, 30.0 * cell)))
-    return tunnel, max(3.0 * cell, 1.8 * tunnel)
+#: Most sites of a percolation lattice (the lattice spacing grows beyond).
+MAX_LATTICE_SITES = 8_000_000
+
+
+def _karst_sizes(run):
+    """Tunnel radius and percolation lattice spacing of the karst preset (metres)."""
+    W, D = run.size
+    _, _, Z = run.relief
+    tunnel = run.feature
+    spacing = 1.8 * tunnel
+    sites = W * D * 1.1 * Z / spacing ** 3
+    if sites > MAX_LATTICE_SITES:
+        spacing *= (sites / MAX_LATTICE_SITES) ** (1.0 / 3.0)
+        tunnel = spacing / 1.8
+        run.stats["sparse_note"] = f"karst lattice widened to {spacing:.3g} m (at most {MAX_LATTICE_SITES} sites)"
+    return tunnel, spacing
 
 
 def _band_mesh(root, extent, z0, z1, voxel, border):
@@ -255,8 +306,8 @@ def _turbulence(seed, wavelength, amplitude, octaves, **extra):
 def sea_geology(run: Amplification, noise_seed: int) -> dict:
     """A soft stratum at sea level, soft spots on the thinnest headland and the cliff foot."""
     H, cell, rng, sea_level = run.heights, run.cell, run.rng, run.sea_level
-    zlo, zhi, Z = run.relief
-    band = max(2.0 * cell, 0.2 * Z)
+    F, C = run.feature, run.scale("coast_cliff_m", 0.25 * run.relief[2])
+    band = max(1.5 * F, 0.2 * C)
     # Less durable spots (the paper places them by hand): one on the thinnest headland,
     # where caves cut from both sides meet into an arch, and two on the cliff foot.
     x0, y0, x1, y1 = run.extent
@@ -264,7 +315,7 @@ def sea_geology(run: Amplification, noise_seed: int) -> dict:
     land = H > sea_level
     width = distance_transform_edt(land) * cell  # half-width of the land at each cell
     ridge = land & (width == maximum_filter(width, size=3)) & (width >= 2 * cell)
-    ridge &= width <= max(3 * cell, 0.5 * Z)
+    ridge &= width <= max(3 * cell, 4.0 * F)
     picks = []
     if ridge.any():
         cand = np.flatnonzero(ridge)
@@ -276,12 +327,12 @@ def sea_geology(run: Amplification, noise_seed: int) -> dict:
     picks += [int(k) for k in rng.choice(cand, size=min(3 - len(picks), len(cand)), replace=False)]
     soft = [{"type": "resistance_skeleton",
              "a": [float(x0 + (k % nx) * cell), float(y0 + (k // nx) * cell), float(sea_level)],
-             "R": float(max(6 * cell, 0.3 * Z)), "weight": -0.5} for k in picks]
+             "R": float(max(3.0 * F, 0.3 * C)), "weight": -0.5} for k in picks]
     return {"type": "resistance_blend", "children": [
         {"type": "resistance_constant", "value": 0.72},
         {"type": "resistance_plane", "point": [0.0, 0.0, float(sea_level + 0.3 * band)],
          "normal": [0.0, 0.0, 1.0], "R": float(band), "weight": -0.25},
-        _turbulence(noise_seed, max(Z / 6, 2 * cell), 0.12, 3)] + soft}
+        _turbulence(noise_seed, max(C / 6, 2 * F), 0.12, 3)] + soft}
 
 
 def sea_steps(run: Amplification) -> list:
@@ -292,18 +343,29 @@ def sea_steps(run: Amplification) -> list:
 def sea(run: Amplification) -> None:
     """Sea erosion with accessibility, each step on the mesh of the terrain carved so far."""
     H, extent, cell, tree = run.heights, run.extent, run.cell, run.tree
-    _, _, Z = run.relief
     W, D = run.size
-    sea_range = max(2.0 * cell, 0.25 * Z)  # the paper: 8 m for its ~40 m cliffs
-    max_r = 0.8 * run.feature  # per step: three steps cut about two feature sizes into soft rock
+    F, C = run.feature, run.scale("coast_cliff_m", 0.25 * run.relief[2])
+    sea_range = max(F, 0.2 * C)  # the paper: 8 m for its ~40 m cliffs
+    max_r = 0.8 * F  # per step: three steps cut about two feature sizes into soft rock
+    # Waves undercut cliffs, not a wave-cut platform or a beach (a cavity carved in a
+    # gentle shore is a crater): faces of at least 30 deg, or less where the DEM's cells
+    # are too coarse to show the coastal cliff that steep (a cliff C high over 3 cells).
+    cos_cliff = math.cos(min(math.radians(30.0), math.atan(C / (3.0 * cell))))
     mesh = heightfield_mesh(H, extent, run.mesh_step)
     weight = None
     steps_arrays = []
     for k in range(run.sea_steps):
-        spacing = float(run.sea_spacing) if run.sea_spacing else max(1.5 * cell, max_r)
+        if run.sea_spacing:
+            spacing = float(run.sea_spacing)
+        else:  # the sea band's area on the DEM mesh bounds the sample count
+            z = mesh.triangles_center[:, 2]
+            steep = mesh.face_normals[:, 2] < cos_cliff
+            area = float(mesh.area_faces[(np.abs(z - run.sea_level) < sea_range) & steep].sum())
+            spacing = run.spacing_for(area, max_r)
+        cliff = mesh.face_normals[:, 2] < cos_cliff
         prims = sea_erosion_step(mesh, run.rho, run.sea_level, sea_range, spacing=spacing, max_radius=max_r,
                                  beta=0.3, threshold=0.08, rays=16, seed=int(run.rng.integers(2 ** 31)),
-                                 face_mask=weight)
+                                 face_mask=cliff if weight is None else cliff & weight)
         arr = run.carving_arrays(prims)
         run.stats[f"sea_step{k + 1}_primitives"] = 0 if arr is None else int(len(arr["radius"]))
         run.timer.step(f"sea erosion step {k + 1}")
@@ -323,7 +385,7 @@ def sea(run: Amplification) -> None:
                                   run.sea_level + sea_range + 2 * max_r,
                                   # The band mesh only guides sampling and rays: at most ~384
                                   # voxels across a large tile (small tiles: one cell).
-                                  max(cell, 0.25 * max_r, max(W, D) / 384.0), 2 * cell)
+                                  max(0.25 * max_r, max(W, D) / 384.0), 2 * cell)
         tree.builder.forget(f"_sea_step{k + 1}")
     out = run.carve("sea_erosion", steps_arrays)
     if out:
@@ -337,22 +399,31 @@ def sea(run: Amplification) -> None:
 def river_geology(run: Amplification, noise_seed: int) -> dict:
     """Soft horizontal strata in a hard rock: undercuts where the river meets them."""
     zlo, _, Z = run.relief
-    spacing = max(3.0 * run.cell, Z / 8)
+    F = run.feature
+    spacing = float(np.clip(run.scale("strata_thickness_m", Z / 8), 2.0 * F, max(2.0 * F, Z / 3)))
     return {"type": "resistance_blend", "children": [
         {"type": "resistance_constant", "value": 0.75},
         {"type": "resistance_strata", "spacing": float(spacing), "R": float(0.3 * spacing),
          "weight": -0.6, "phase": float(zlo)},
-        _turbulence(noise_seed, 4 * run.cell, 0.1, 3, strata=False)]}
+        _turbulence(noise_seed, 2.0 * F, 0.1, 3, strata=False)]}
 
 
 def river(run: Amplification) -> None:
     """Stream-power river erosion of the canyon walls."""
-    H, cell = run.heights, run.cell
+    H, F = run.heights, run.feature
     _, _, Z = run.relief
     mesh = heightfield_mesh(H, run.extent, run.mesh_step)
-    flood = max(4.0 * cell, 0.25 * Z)
-    prims = river_erosion(H, run.extent, mesh, run.rho, spacing=max(1.5 * cell, 0.8 * run.feature),
-                          max_radius=run.feature, flood_height=flood, beta=0.15, threshold=0.08,
+    # Floods reach half the valley's depth: on a 10 m DEM a canyon's walls stand back
+    # from the river behind talus, their feet tens of metres above the water.
+    flood = max(F, 0.5 * run.scale("valley_depth_m", run.scale("cliff_height_m", 0.25 * Z)))
+    W, D = run.size
+    # Walls up to the flood height along the rivers: a fraction of the tile at most.
+    spacing = run.spacing_for(0.25 * W * D, 0.8 * F)
+    # The river floods its whole floor: its stress reaches the walls of a flat-floored
+    # canyon (half the valley width), and only the walls (>= 30 deg) are undercut.
+    bank = max(3.0 * run.cell, 0.6 * run.scale("valley_width_m", 0.0))
+    prims = river_erosion(H, run.extent, mesh, run.rho, spacing=spacing, bank_width=bank, min_slope_deg=30.0,
+                          max_radius=F, flood_height=flood, beta=0.15, threshold=0.08,
                           seed=int(run.rng.integers(2 ** 31)))
     run.timer.step("stream power and sampling")
     run.add_carving("river_erosion", prims, "river_primitives")
@@ -363,8 +434,8 @@ def karst_geology(run: Amplification, noise_seed: int) -> dict:
     """Two soft strata, each a few percolation sites thick (else the network dies out)."""
     _, zhi, Z = run.relief
     children = [{"type": "resistance_constant", "value": 0.8},
-                _turbulence(noise_seed, 6 * run.cell, 0.12, 3, strata=False)]
-    _, spacing = _karst_sizes(run.cell, Z)
+                _turbulence(noise_seed, 4.0 * run.feature, 0.12, 3, strata=False)]
+    _, spacing = _karst_sizes(run)
     for frac in (0.25, 0.65):
         children.append({"type": "resistance_plane", "point": [0.0, 0.0, float(zhi - frac * Z)],
                          "normal": [0.0, 0.0, 1.0], "R": float(2.0 * spacing), "weight": -0.6})
@@ -377,10 +448,13 @@ def karst(run: Amplification) -> None:
     zlo, zhi, Z = run.relief
     seeds = ks.karst_seeds(H, extent, 6, run.rng)
     run.timer.step("sinks")
-    tunnel, spacing = _karst_sizes(run.cell, Z)
+    tunnel, spacing = _karst_sizes(run)
+    W, D = run.size
+    sites = W * D * 1.1 * Z / spacing ** 3
     prims = ks.karst_network(run.terrain.elevation_np, extent, (zlo - 0.1 * Z, zhi), run.rho, seeds,
                              spacing=spacing, max_radius=tunnel, rho0=0.45, epsilon=0.1, beta=0.3,
-                             max_sites=max(2000, H.size // 8), seed=int(run.rng.integers(2 ** 31)))
+                             max_sites=int(min(MAX_PRIMITIVES, max(2000, sites // 8))),
+                             seed=int(run.rng.integers(2 ** 31)))
     run.add_carving("karst_tunnels", prims, "karst_primitives")
 
 
@@ -388,33 +462,33 @@ def karst(run: Amplification) -> None:
 def hoodoos_geology(run: Amplification, noise_seed: int) -> dict:
     """Alternating hard and soft strata, about one grammar symbol per layer."""
     zlo, _, Z = run.relief
-    spacing = max(2.0 * run.cell, 0.12 * Z)
+    spacing = run.feature / 3.0  # one grammar symbol per layer
     return {"type": "resistance_blend", "children": [
         {"type": "resistance_constant", "value": 0.3},
         {"type": "resistance_strata", "spacing": float(spacing), "R": float(0.45 * spacing),
          "weight": 0.6, "phase": float(zlo)},
-        _turbulence(noise_seed, 3 * run.cell, 0.1, 2, strata=False)]}
+        _turbulence(noise_seed, 1.5 * spacing, 0.1, 2, strata=False)]}
 
 
 def hoodoos(run: Amplification) -> None:
     """Hoodoos placed by slope and drainage area, grown by the open shape grammar."""
-    H, extent, cell, T = run.heights, run.extent, run.cell, run.T
-    _, _, Z = run.relief
-    s0 = max(2.0 * cell, 0.15 * Z)
+    H, extent, T = run.heights, run.extent, run.T
+    s0 = run.feature / 3.0  # symbol height: hoodoos of about F (three symbols or more)
+    W, D = run.size
     P = hd.hoodoo_probability(H, extent)
     run.timer.step("placement probability")
     P = P / max(float(P.max()), 1e-12)  # the best sites grow a hoodoo for sure
-    sym = hd.hoodoo_field(H, extent, run.terrain.elevation_np, run.rho, spacing=max(4.0 * cell, 1.6 * s0), s0=s0,
+    sym = hd.hoodoo_field(H, extent, run.terrain.elevation_np, run.rho, spacing=run.spacing_for(W * D, 1.6 * s0, 6.0), s0=s0,
                           width0=0.7 * s0, probability=P, seed=int(run.rng.integers(2 ** 31)))
     if not len(sym):
         return
-    Rf = np.maximum(0.8 * sym.width, 0.5 * cell)
+    Rf = np.maximum(0.8 * sym.width, run.precision)
     x = math.sqrt(1.0 - 0.5 ** (1.0 / 3.0))  # g(x) = 1/2: the surface where 2T g = T
     core = np.maximum(sym.width - x * Rf, 0.0)
     rel = run.tree.file("hoodoos.npz", lambda p: save_npz(p, a=sym.a, b=sym.b, radius=Rf,
                                                            energy=np.full(len(Rf), 2.0 * T), core=core))
     run.tree.add("hoodoos", {"type": "skeletal_set", "file": rel, "combine": "max",
-                             "noise": {"amplitude": 0.12, "wavelength": float(max(s0 / 2, cell)),
+                             "noise": {"amplitude": 0.12, "wavelength": float(max(s0 / 2, 2.0 * run.precision)),
                                        "octaves": 2, "seed": int(run.rng.integers(2 ** 31))}})
     run.children.append("hoodoos")
     run.stats["hoodoos"] = int(sym.hoodoo.max() + 1)
@@ -426,7 +500,7 @@ def hoodoos(run: Amplification) -> None:
 def strata_geology(run: Amplification, noise_seed: int) -> dict:
     """A folded, faulted layer cake."""
     zlo, _, Z = run.relief
-    spacing = max(2.0 * run.cell, Z / 7)
+    spacing = _bed_pair(run)
     x0, y0, x1, y1 = run.extent
     # No 3-D turbulence here: the erosion node evaluates rho at every ray step near the
     # cliffs, and the fold already makes the layers irregular.
@@ -445,19 +519,29 @@ def strata_geology(run: Amplification, noise_seed: int) -> dict:
             "slip": [0.0, 0.0, float(0.5 * spacing)], "width": float(0.5 * spacing)}
 
 
+def _bed_pair(run: Amplification) -> float:
+    """Thickness of a hard + soft bed pair: the measured period, at least two pairs per cliff."""
+    _, _, Z = run.relief
+    cliff = run.scale("cliff_height_m", 0.25 * Z)
+    return float(max(min(run.scale("strata_thickness_m", Z / 7), 0.5 * cliff), 2.0 * run.feature / 3.0,
+                     4.0 * run.precision))
+
+
 def strata(run: Amplification) -> None:
     """The erosion node over the steep faces of the DEM."""
-    H, extent, cell, R, T = run.heights, run.extent, run.cell, run.R, run.T
+    H, extent, R, T = run.heights, run.extent, run.R, run.T
     mesh = heightfield_mesh(H, extent, run.mesh_step)
     steep = mesh.face_normals[:, 2] < math.cos(math.radians(40.0))
     c = mesh.triangles_center
     x0, y0, x1, y1 = extent
     inner = (c[:, 0] > x0 + 2 * R) & (c[:, 0] < x1 - 2 * R) & (c[:, 1] > y0 + 2 * R) & (c[:, 1] < y1 - 2 * R)
-    pts, _ = sample_mesh(mesh, 3.0 * cell, (steep & inner).astype(float), run.rng)
+    # Erosion spheres of half a bed pair (soft beds recede by about that much).
+    Rd = max(0.5 * _bed_pair(run), 2.0 * run.precision)
+    area = float(mesh.area_faces[steep & inner].sum())
+    pts, _ = sample_mesh(mesh, run.spacing_for(area, 0.6 * Rd), (steep & inner).astype(float), run.rng)
     run.timer.step("cliff sampling")
     if not len(pts):
         return
-    Rd = 5.0 * cell
     rel = run.tree.file("strata_erosion.npz", lambda p: save_npz(p, a=pts, radius=np.full(len(pts), Rd),
                                                                   energy=np.full(len(pts), 2.0 * T)))
     run.tree.add("strata_field", {"type": "skeletal_set", "file": rel, "combine": "max"})

@@ -78,14 +78,17 @@ def river_stress(heights, extent, bed_threshold=0.25, bank_width=None, sigma_ref
     bed = sn > bed_threshold
     width = 3.0 * min(dx, dy) if bank_width is None else float(bank_width)
     k = max(1, int(round(width / min(dx, dy))))
-    yy, xx = np.mgrid[-k:k + 1, -k:k + 1]
-    disc = (xx * dx) ** 2 + (yy * dy) ** 2 <= (k * min(dx, dy)) ** 2
-    S = grey_dilation(np.where(bed, sn, 0.0), footprint=disc)
+    if k <= 8:
+        yy, xx = np.mgrid[-k:k + 1, -k:k + 1]
+        reach = dict(footprint=(xx * dx) ** 2 + (yy * dy) ** 2 <= (k * min(dx, dy)) ** 2)
+    else:  # wide banks: a square (separable, fast at any width) instead of the disc
+        reach = dict(size=(2 * k + 1, 2 * k + 1))
+    S = grey_dilation(np.where(bed, sn, 0.0), **reach)
     S = np.clip(gaussian_filter(S, 0.5 * k), 0.0, 1.0)
     S[S < 1e-3] = 0.0
     # Water level: the lowest filled bed height within reach (banks see their river's level).
     Z = fill_depressions(H)
-    water = grey_erosion(np.where(bed, Z, np.inf), footprint=disc)
+    water = grey_erosion(np.where(bed, Z, np.inf), **reach)
     water = np.where(np.isfinite(water), water, Z)
     return dict(stress=S, water=water, bed=bed, sigma=sigma, area=A, slope=s, sigma_ref=ref)
 
@@ -103,7 +106,8 @@ def _bilinear(grid, extent, x, y):
 
 
 def river_erosion(heights, extent, mesh, resistance, spacing, max_radius, flood_height,
-                  beta=0.2, threshold=0.05, bed_threshold=0.25, bank_width=None, seed=0, stress=None):
+                  beta=0.2, threshold=0.05, bed_threshold=0.25, bank_width=None, seed=0, stress=None,
+                  min_slope_deg=0.0):
     """River-erosion primitives on the walls of the valleys of a heightfield.
 
     Parameters
@@ -130,6 +134,9 @@ def river_erosion(heights, extent, mesh, resistance, spacing, max_radius, flood_
         Seed of the sampling.
     stress : dict, optional
         A precomputed :func:`river_stress` result.
+    min_slope_deg : float
+        Sample only faces at least this steep: the walls, not the floor of a
+        flat-floored canyon (where a dent would be no overhang).
 
     Returns
     -------
@@ -145,7 +152,8 @@ def river_erosion(heights, extent, mesh, resistance, spacing, max_radius, flood_
     cx, cy = tri[:, :, 0].mean(axis=1), tri[:, :, 1].mean(axis=1)
     above = tri[:, :, 2].max(axis=1) - _bilinear(water, extent, cx, cy)
     weight = ((_bilinear(S, extent, cx, cy) > 0) & (above >= 0)
-              & (tri[:, :, 2].min(axis=1) - _bilinear(water, extent, cx, cy) <= flood_height))
+              & (tri[:, :, 2].min(axis=1) - _bilinear(water, extent, cx, cy) <= flood_height)
+              & (mesh.face_normals[:, 2] <= np.cos(np.radians(min_slope_deg)) + 1e-12))
     points, _ = sample_mesh(mesh, spacing, weight.astype(np.float64), rng)
     if len(points) == 0:
         return ErosionPrimitives.empty()

@@ -14,7 +14,9 @@ implicit_heightfield     the keys of ``heightfield`` (extent, [base], source = "
                          (threshold, in [R/3, 2R]), [bumps] (table: file (.npz with
                          center (N,2), radius, height) or inline center, radius,
                          height), [amplification] (table: amplitude, wavelength,
-                         [octaves = 4], [lacunarity = 2], [gain = 0.5], [seed = 0])
+                         [octaves = 4], [lacunarity = 2], [gain = 0.5], [seed = 0],
+                         [border = 0], [taper = 0]: fBm faded out within border +
+                         taper metres of the tile's edge)
 skeletal_set             file (.npz) or inline a (N x 3), [b = a], radius, [energy = 1],
                          [core = 0], [group]; [combine = "sum" | "max"],
                          [threshold = 0], [cell_size], [noise] (table: [amplitude =
@@ -124,6 +126,7 @@ def _implicit_heightfield(t: Table, ctx):
     sub = t.table("amplification", None)
     if sub is not None:
         amp = core.fbm_args(sub)
+        amp.update(border=sub.number("border", 0.0, lo=0.0), taper=sub.number("taper", 0.0, lo=0.0))
         sub.finish()
     try:
         return ImplicitHeightfield(hf.heights_np, hf.extent, R=R, T=T, base=t.data.get("base"),

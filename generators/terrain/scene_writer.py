@@ -1,18 +1,26 @@
-"""Scene files for amplified terrains: TOML text, camera framing, sun and material.
+"""Scene files for amplified terrains: TOML text, cameras, sun, material, water and far field.
 
 ``arches-render amplify`` writes the construction tree it built as ``[nodes.*]``
 tables of a scene file (TOML data, never code), with the arrays of primitive sets
 in ``.npz`` files and the heights in a ``.npy`` beside it. This module turns those
-tables into TOML text and chooses what a first render needs:
+tables into TOML text and chooses what a first render needs
+(:func:`scene_document`):
 
-Camera
-    Aimed at the features (the centroid of the generated primitives, else the
-    terrain's centre) from *downhill* (the sea, the valley), so that cliffs,
-    caves and canyon walls face the camera; far enough to frame most features,
-    ``el`` degrees above the target, and never below the terrain under it.
+Cameras
+    Close shots of the landforms (:mod:`.shots`), named after the preset's
+    landform (``sea_cave_1``, ...), then ``overview``: aimed at the features (the
+    centroid of the generated primitives, else the terrain's centre) from
+    *downhill* (the sea, the valley), so that cliffs, caves and canyon walls face
+    the camera; far enough to frame most features, ``el`` degrees above the
+    target, and never below the terrain under it.
 Sun
-    ``sunsky`` at 35 degrees, 55 degrees round from the camera's azimuth: grazing
-    enough to model overhangs with shadow, bright enough to see into caves.
+    ``sunsky`` at 35 degrees, 55 degrees round from the first camera's azimuth:
+    grazing enough to model overhangs with shadow, bright enough to see into caves.
+Ground and water
+    The far field (``[[far_field]]``, :mod:`.far_field`) continues the terrain to
+    the horizon in the same material, and the sea with it where the sea reaches
+    the tile's border; the water surfaces of the tile (:mod:`.water`) are a mesh.
+    Tiles of a kilometre or more get an ``[atmosphere]``: distance reads as haze.
 Material
     The ``terrain`` triplanar preset (rock, sand, grass, snow) with its layer
     heights rescaled to the DEM's elevation range, so that a 6 km DEM is not all
@@ -26,12 +34,19 @@ from __future__ import annotations
 import json
 import math
 import re
+from pathlib import Path
 
 import numpy as np
 
 from arches_render.materials.masks import terrain_look
 
-__all__ = ["toml_text", "frame_camera", "landscape_material", "sun_for"]
+from .presets import PRESETS
+
+__all__ = ["toml_text", "frame_camera", "landscape_material", "sun_for", "scene_document", "LANDFORM_NAMES"]
+
+#: Camera names of the close shots, per preset.
+LANDFORM_NAMES = {"sea": "sea_cave", "river": "undercut", "karst": "tunnel", "hoodoos": "hoodoos",
+                  "strata": "cliff"}
 
 _BARE = re.compile(r"^[A-Za-z0-9_-]+$")
 
@@ -67,7 +82,7 @@ def toml_text(doc, header=""):
     doc : dict
         Top-level keys map to tables (dicts of scalars, arrays and inline tables),
         arrays of tables (lists of dicts: ``[[lights]]``), or, for ``nodes`` and
-        ``materials``, dicts of named tables (``[nodes.NAME]``).
+        ``materials`` and ``cameras``, dicts of named tables (``[nodes.NAME]``).
     header : str
         Comment lines put first (without the ``#``).
 
@@ -80,7 +95,7 @@ def toml_text(doc, header=""):
         if isinstance(body, list):
             for item in body:
                 out += ["", f"[[{_key(name)}]]"] + [f"{_key(k)} = {_value(v)}" for k, v in item.items()]
-        elif name in ("nodes", "materials"):
+        elif name in ("nodes", "materials", "cameras"):
             for sub, table in body.items():
                 out += ["", f"[{_key(name)}.{_key(sub)}]"] + [f"{_key(k)} = {_value(v)}" for k, v in table.items()]
         else:
@@ -197,3 +212,98 @@ def landscape_material(zlo, zhi, sea_level=None, geology=None, box=None, preset=
         mat.update(terrain_look(geology, box, STRATA_PALETTE.get(preset, "sandstone"), "geology", sea_level,
                                 cavity_radius=2.0 * cell))
     return mat
+
+
+def _geology(result):
+    """The built geology node of ``result`` (the material's strata read it) and the rock's volume."""
+    from arches_render.scene.nodes import NodeBuilder
+    if "geology" not in result.tables:
+        return None, None
+    node = NodeBuilder({"geology": result.tables["geology"]}, Path("geology.toml"), Path(".")).named("geology")
+    x0, y0, x1, y1 = result.extent
+    base = float(result.terrain.bounds()[0][2])
+    return node, (np.array([x0, y0, base]), np.array([x1, y1, float(result.heights.max())]))
+
+
+def _view_azimuth(cam):
+    return math.degrees(math.atan2(cam["target"][1] - cam["origin"][1], cam["target"][0] - cam["origin"][0]))
+
+
+def scene_document(result, name, work_dir, progress=None, close=3):
+    """The scene document of an :class:`~.amplify.Amplified` and the header lines that describe it.
+
+    Parameters
+    ----------
+    result : Amplified
+    name : str
+        Scene name.
+    work_dir : Path
+        Folder holding the data files of ``result`` (the water mesh is read there).
+    progress : callable, optional
+        ``progress(done, total)`` while choosing the close shots.
+    close : int
+        Close shots wanted.
+
+    Returns
+    -------
+    (dict, list of str)
+        The document for :func:`toml_text` and the header lines (preset and
+        reason, precision and detail, water, cameras, notes).
+    """
+    import trimesh
+
+    from .shots import close_shots
+    H, extent = result.heights, result.extent
+    zlo, zhi = float(H.min()), float(H.max())
+    x0, y0, x1, y1 = extent
+    size = max(x1 - x0, y1 - y0)
+    stats = result.stats
+    water = result.water
+    wmesh = trimesh.load_mesh(Path(work_dir) / result.water_file, process=False) if result.water_file else None
+    feature = max(float(result.scales.get("feature_m", 4 * stats["cell_size"])), 2.0 * result.precision)
+    shots = close_shots(result.root, result.terrain, H, extent, feature,
+                        water_level=water.level if water is not None else None, water_mesh=wmesh, count=close,
+                        margin=result.terrain.R_np + 2 * stats["cell_size"], progress=progress)
+    label = LANDFORM_NAMES[result.preset]
+    cameras = {f"{label}_{k + 1}": shot.table() for k, shot in enumerate(shots)}
+    over = frame_camera(H, extent, result.focus, elevation=PRESETS[result.preset].camera_elevation)
+    cameras["overview"] = {"origin": over["origin"], "target": over["target"], "fov": over["fov"]}
+    first = next(iter(cameras.values()))
+    doc = {
+        "scene": {"name": name,
+                  "description": f"DEM amplified with the '{result.preset}' preset (seed {stats['seed']}): "
+                                 f"{stats['nodes']} nodes, {stats['primitives']} primitives"},
+        "render": {"resolution": [640, 360], "spp": 32, "max_depth": 3},
+        "cameras": cameras,
+        "lights": [sun_for(dict(first, azimuth=_view_azimuth(first)))],
+        "materials": {"landscape": landscape_material(zlo, zhi, result.sea_level, *_geology(result),
+                                                      preset=result.preset, cell=stats["cell_size"])},
+        "field": {"root": "world", "material": "landscape"},
+    }
+    far = {"node": "terrain", "material": "landscape"}
+    if water is not None and water.wet:
+        doc["materials"]["water"] = {"type": "diffuse", "color": [0.03, 0.09, 0.12]}
+        if result.water_file:
+            doc["meshes"] = [{"file": result.water_file, "material": "water"}]
+        if water.touches_border:
+            far.update(sea_level=float(water.sea_level), water_material="water")
+    doc["far_field"] = [far]
+    if size >= 1000.0:
+        doc["atmosphere"] = {}
+    doc["nodes"] = result.tables
+    lines = [f"Terrain amplification (Paris et al. 2019): {stats['nodes']} nodes, {stats['primitives']} primitives, "
+             f"{stats['memory_bytes'] / 1e6:.2f} MB",
+             f"Preset {result.preset}: {result.reason}",
+             "Landform sizes (m): " + ", ".join(f"{k[:-2]} {v:.3g}" for k, v in result.scales.items()),
+             f"Precision {result.precision:g} m: " + (
+                 f"{result.detail['octaves']} fBm octaves from {result.detail['wavelength']:g} m, "
+                 f"gain {result.detail['gain']:.3g} (Hurst {stats['detail_fit'].get('hurst') or 0:.2f})"
+                 if result.detail else "no detail below the DEM's cell")]
+    if water is not None and water.wet:
+        lines.append(f"Water: {'sea at %g m' % water.sea_level if water.sea_level is not None else 'no sea'}"
+                     f"{', reaching the border' if water.touches_border else ''}; {len(water.lakes)} lakes")
+    lines.append("Cameras: " + "; ".join(
+        [f"{n} ({s['height_m']:.0f} m above ground, landform {s['volume_m3']:.3g} m3, covers "
+         f"{100 * s['cover']:.0f} % of the frame)" for n, s in zip(cameras, shots)] + ["overview"]))
+    lines += [f"Note: {n}" for n in ([stats["note"]] if "note" in stats else []) + stats.get("notes", [])]
+    return doc, lines

@@ -1,0 +1,269 @@
+"""The far field: terrain and sea from the edge of a DEM tile to the horizon (issue 14).
+
+A heightfield tile ends at its border: seen from inside, the ground stops in a wall
+(the cut sides of the terrain's bounding prism) and, past it, in the black lower
+hemisphere of the sky. The far field continues the ground as a coarse, cheap
+triangle mesh in the same material, and the sea as a flat ring at sea level:
+
+Frame
+    For an ``implicit_heightfield`` (Paris et al. 2019, Sec. 5.1) the DEM is
+    embedded exactly only inside the domain shrunk by its falloff radius ``R``;
+    in the outer band the surface rounds down into the prism's walls. The frame
+    is the mesh of the DEM's own samples in that band (from one cell inside the
+    seam to the border), lifted by a quarter of each cell's bilinear twist so that
+    it covers the bilinear surface it replaces: the rounded edge and the walls lie
+    under it. A plain ``heightfield`` is exact up to its border and gets no frame.
+Rings
+    From the border outwards, rings at distances ``s_0 = 0, s_1 = cell,
+    s_{k+1} = 1.35 s_k`` up to ``reach`` (default ``max(1e7 m, 1000 x the tile)``,
+    so that a camera 1 km above the ground sees no gap below the horizon wider
+    than 1e-4 rad). Ring ``k`` is the border loop moved outwards by ``s_k``
+    (sides along their normals, corners diagonally) with the border heights
+    *low-pass filtered along the loop* by a circular Gaussian of
+    ``sigma = s_k / 2`` (so the relief of the border fades with distance and,
+    far away, the ground is the border's mean height). Ring ``k`` keeps every
+    ``2^j``-th loop point with ``2^j spacing <= s_k / 2`` (the corners always):
+    the mesh has a few thousand triangles beyond the frame whatever the DEM's size.
+Sea
+    With ``sea_level``, a flat ring at that level from the tile's border to
+    ``reach`` (the water inside the tile is the scene's own, e.g. amplify's
+    ``water.ply``): where the far ground lies below the sea, the sea reaches the
+    horizon.
+
+Scene table (``[[far_field]]``, one per heightfield)::
+
+    [[far_field]]
+    node = "terrain"            # a heightfield or implicit_heightfield node, untransformed
+    material = "landscape"      # the ground's material
+    reach = 1e7                 # optional, metres from the border
+    sea_level = 0.0             # optional: a sea ring at this level ...
+    water_material = "water"    # ... in this material (required with sea_level)
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import mitsuba as mi
+import numpy as np
+import trimesh
+
+from arches_render.field import Heightfield
+
+__all__ = ["FarField", "far_field_mesh", "sea_ring_mesh", "parse_far_field", "default_reach"]
+
+_GROWTH = 1.35  # ring distance ratio
+
+
+def default_reach(extent) -> float:
+    """Default distance of the far field's outer edge from the border (metres)."""
+    x0, y0, x1, y1 = extent
+    return max(1e7, 1000.0 * max(x1 - x0, y1 - y0))
+
+
+def _loop(nx, ny):
+    """Grid indices ``(j, i)`` of the border loop (counter-clockwise from ``(0, 0)``) and the
+    corner positions in it."""
+    bottom = [(0, i) for i in range(nx)]
+    right = [(j, nx - 1) for j in range(1, ny)]
+    top = [(ny - 1, i) for i in range(nx - 2, -1, -1)]
+    left = [(j, 0) for j in range(ny - 2, 0, -1)]
+    loop = np.array(bottom + right + top + left)
+    corners = np.array([0, nx - 1, nx - 1 + ny - 1, 2 * (nx - 1) + ny - 1])
+    return loop, corners
+
+
+def _outward(loop, nx, ny):
+    """Offset direction of each loop point: side normals, diagonals at the corners."""
+    j, i = loop[:, 0], loop[:, 1]
+    out = np.zeros((len(loop), 2))
+    out[j == 0, 1] = -1.0
+    out[j == ny - 1, 1] = 1.0
+    out[i == 0, 0] = -1.0
+    out[i == nx - 1, 0] = 1.0
+    return out
+
+
+def _circular_smooth(values, sigma_samples):
+    """Circular Gaussian smoothing (FFT: any sigma costs the same)."""
+    if sigma_samples <= 0:
+        return values.copy()
+    n = len(values)
+    f = np.fft.rfftfreq(n)
+    return np.fft.irfft(np.fft.rfft(values) * np.exp(-2.0 * (math.pi * sigma_samples * f) ** 2), n)
+
+
+def _zip(a, b, off_a, off_b):
+    """Triangles between two closed rings of loop indices: ``a`` and its subset ``b`` (both sorted).
+
+    Each segment ``b_j -> b_j+1`` of the coarse ring faces the run of fine points
+    from ``b_j`` to ``b_j+1``: a fan to ``b_j`` over the first half of the run, to
+    ``b_j+1`` over the second, and one triangle joining the two apexes.
+    """
+    tris = []
+    pos = {int(v): k for k, v in enumerate(a)}
+    na, nb = len(a), len(b)
+    for jb in range(nb):
+        k0 = pos[int(b[jb])]
+        k1 = pos[int(b[jb + 1])] if jb + 1 < nb else na
+        mid = (k0 + k1 + 1) // 2
+        for k in range(k0, k1):
+            apex = jb if k < mid else (jb + 1) % nb
+            tris.append((off_a + k % na, off_a + (k + 1) % na, off_b + apex))
+        tris.append((off_a + mid % na, off_b + (jb + 1) % nb, off_b + jb))
+    return tris
+
+
+def far_field_mesh(node, reach=None):
+    """Ground mesh of the far field of a heightfield node (see the module docstring).
+
+    Parameters
+    ----------
+    node : arches_render.field.Heightfield
+        A ``heightfield`` or ``implicit_heightfield`` node (world coordinates).
+    reach : float, optional
+        Distance of the outer ring from the border, metres (default :func:`default_reach`).
+
+    Returns
+    -------
+    trimesh.Trimesh
+        Upward-facing triangles with vertex normals.
+    """
+    H = np.asarray(node.heights_np, np.float64)
+    ny, nx = H.shape
+    x0, y0, x1, y1 = node.extent
+    dx, dy = (x1 - x0) / (nx - 1), (y1 - y0) / (ny - 1)
+    reach = float(reach) if reach is not None else default_reach(node.extent)
+    V, F = [], []
+
+    # Frame (implicit heightfields): the DEM's samples in the outer band, one cell past the seam.
+    R = getattr(node, "R_np", None)
+    lift = np.zeros_like(H)
+    if R is not None:
+        bi = min(int(math.ceil(R / dx - 1e-9)) + 1, (nx - 1) // 2)
+        bj = min(int(math.ceil(R / dy - 1e-9)) + 1, (ny - 1) // 2)
+        twist = np.abs(H[:-1, :-1] - H[:-1, 1:] - H[1:, :-1] + H[1:, 1:]) / 4.0
+        for sj in (slice(0, -1), slice(1, None)):
+            for si in (slice(0, -1), slice(1, None)):
+                lift[sj, si] = np.maximum(lift[sj, si], twist)
+        J, I = np.mgrid[0:ny, 0:nx]
+        lift[(I >= bi) & (I <= nx - 1 - bi) & (J >= bj) & (J <= ny - 1 - bj)] = 0.0  # the inner edge: exact
+        cj, ci = np.nonzero((I[:-1, :-1] < bi) | (I[:-1, :-1] >= nx - 1 - bi)
+                            | (J[:-1, :-1] < bj) | (J[:-1, :-1] >= ny - 1 - bj))
+        used = np.zeros(H.shape, bool)
+        for a, b in ((0, 0), (0, 1), (1, 0), (1, 1)):
+            used[cj + a, ci + b] = True
+        vj, vi = np.nonzero(used)
+        vid = np.full(H.shape, -1, np.int64)
+        vid[vj, vi] = np.arange(len(vj))
+        V.append(np.column_stack([x0 + vi * dx, y0 + vj * dy, H[vj, vi] + lift[vj, vi]]))
+        a, b, c, d = vid[cj, ci], vid[cj, ci + 1], vid[cj + 1, ci], vid[cj + 1, ci + 1]
+        F += [np.column_stack([a, b, d]), np.column_stack([a, d, c])]
+
+    # Rings from the border outwards.
+    loop, corners = _loop(nx, ny)
+    out = _outward(loop, nx, ny)
+    border = (H + lift)[loop[:, 0], loop[:, 1]]  # the frame's border vertices, shared exactly
+    xy = np.column_stack([x0 + loop[:, 1] * dx, y0 + loop[:, 0] * dy])
+    spacing = min(dx, dy)
+    s = [0.0, max(dx, dy)]
+    while s[-1] * _GROWTH < reach:
+        s.append(s[-1] * _GROWTH)
+    s.append(reach)
+    off = sum(len(v) for v in V)
+    prev = None
+    for sk in s:
+        step = 1 << max(0, int(math.floor(math.log2(max(1.0, sk / (2.0 * spacing))))))
+        keep = np.union1d(np.arange(0, len(loop), step), corners)
+        h = _circular_smooth(border, 0.5 * sk / spacing)[keep]
+        V.append(np.column_stack([xy[keep] + sk * out[keep], h]))
+        if prev is not None:
+            pkeep, poff = prev
+            # The coarser ring is a subset of the finer one (steps are powers of two).
+            F.append(np.array(_zip(pkeep, keep, poff, off), np.int64))
+        prev = (keep, off)
+        off += len(keep)
+    # Merged vertices (frame and first ring share theirs) and upward faces, so that
+    # vertex normals are smooth across the seams.
+    mesh = trimesh.Trimesh(np.concatenate(V), np.concatenate(F), process=True)
+    faces = mesh.faces.copy()
+    down = mesh.face_normals[:, 2] < 0
+    faces[down] = faces[down][:, ::-1]
+    return trimesh.Trimesh(mesh.vertices, faces, process=False)
+
+
+def sea_ring_mesh(extent, level, reach):
+    """A flat ring at ``level`` from the rectangle ``extent`` to ``reach`` beyond it (upward faces)."""
+    x0, y0, x1, y1 = extent
+    inner = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
+    outer = [(x0 - reach, y0 - reach), (x1 + reach, y0 - reach), (x1 + reach, y1 + reach), (x0 - reach, y1 + reach)]
+    V = np.array([(x, y, level) for x, y in outer + inner], np.float64)
+    F = []
+    for q in range(4):
+        o0, o1, i0, i1 = q, (q + 1) % 4, 4 + q, 4 + (q + 1) % 4
+        F += [(o0, o1, i1), (o0, i1, i0)]
+    return trimesh.Trimesh(V, np.array(F), process=False)
+
+
+def _mitsuba_mesh(name, mesh, bsdf):
+    props = mi.Properties()
+    props["bsdf"] = bsdf
+    m = mi.Mesh(name, len(mesh.vertices), len(mesh.faces), props, has_vertex_normals=True)
+    params = mi.traverse(m)
+    params["vertex_positions"] = mi.Float(np.asarray(mesh.vertices, np.float32).ravel())
+    params["faces"] = mi.UInt32(np.asarray(mesh.faces, np.uint32).ravel())
+    params["vertex_normals"] = mi.Float(np.asarray(mesh.vertex_normals, np.float32).ravel())
+    params.update()
+    return m
+
+
+@dataclass
+class FarField:
+    """A validated ``[[far_field]]`` entry (an item of a scene table, :mod:`arches_render.extensions`)."""
+
+    index: int
+    node: Heightfield
+    material: str
+    reach: float
+    sea_level: float | None = None
+    water_material: str | None = None
+
+    @property
+    def name(self) -> str:
+        """``far_field<index>``: prefix of its shape ids."""
+        return f"far_field{self.index}"
+
+    def meshes(self) -> list:
+        """``[(material, trimesh.Trimesh)]``: the ground, then the sea ring if any."""
+        out = [(self.material, far_field_mesh(self.node, self.reach))]
+        if self.sea_level is not None:
+            out.append((self.water_material, sea_ring_mesh(self.node.extent, self.sea_level, self.reach)))
+        return out
+
+    def shapes(self, bsdfs: dict, progress=None) -> list:
+        """Mitsuba meshes of the far field with their BSDFs from ``bsdfs``."""
+        return [_mitsuba_mesh(f"{self.name}_{k}", m, bsdfs[mat]) for k, (mat, m) in enumerate(self.meshes())]
+
+    def point_instancer(self):
+        """No instances: the far field is plain meshes."""
+        return None
+
+
+def parse_far_field(t, builder, field_node, materials: dict, scene_file, index: int) -> FarField:
+    """Validate one ``[[far_field]]`` table (keys in the module docstring)."""
+    node = builder.named(t.string("node"), t, "node")
+    if not isinstance(node, Heightfield):
+        raise t.error("node", f"must name a heightfield or implicit_heightfield node (got a {node.kind})")
+    mat = t.string("material")
+    if mat not in materials:
+        raise t.error("material", f"unknown material '{mat}' (defined: {', '.join(sorted(materials))})")
+    reach = t.number("reach", default_reach(node.extent), lo=0, lo_open=True)
+    sea = t.number("sea_level", None)
+    water = None
+    if sea is not None:
+        water = t.string("water_material")
+        if water not in materials:
+            raise t.error("water_material", f"unknown material '{water}' (defined: {', '.join(sorted(materials))})")
+    t.finish()
+    return FarField(index, node, mat, float(reach), sea, water)

@@ -1,0 +1,306 @@
+"""Shots an artist would choose: close views of the landforms an amplification made (issue 14).
+
+``amplify`` writes named cameras: close shots at human or drone height aimed at
+the most significant 3-D landforms, and an overview. How they are chosen:
+
+Landforms
+    The primitives of the tree (every ``skeletal_set``: carving spheres and
+    tunnels, hoodoo symbols, erosion spheres) are binned on a horizontal grid of
+    ``G = 10 F`` (``F`` the landform size): a cell is one landform-sized piece of
+    coast, canyon wall or cave network. For the 24 fullest cells, the amplified
+    field and the plain terrain (DEM and detail, no landform) are sampled on a
+    voxel grid over the cell (48 voxels across): the *3-D volume* is the volume of
+    air with matter above it in the amplified field (caves, arches, overhangs,
+    undercuts) plus, for hoodoos, the matter standing above the plain surface, plus
+    a quarter of the ground only lowered (a 2.5-D change).
+    Landforms are ranked by it.
+Views
+    Around the centroid of each landform's primitives, cameras on 16 azimuths at 4
+    distances (a feature of size ``F`` spanning about 1/1.5, 1/3, 1/6 and 1/12 of the
+    frame's half width, at most 1.5 times the landform's extent) and 5 heights
+    above the ground under them (1.7, 6, 20, 60 and 150 m) look at it. A camera
+    must stand in air (the amplified field below ``-0.25 m`` there), above any water
+    by 0.5 m, over the DEM (not the far field), and look down by less than
+    ``0.6 x`` half the vertical field of view (else the target is raised), so the
+    sky or the horizon is in the frame. Each view casts a 32 x 18 grid of rays
+    (Embree) against the mesh of the amplified field around the landform (banded
+    polygonization), the DEM mesh of the rest of the tile (not over the landform,
+    where the DEM's surface would close the mouths of its caves) and the water: its *cover* is
+    the fraction of rays whose first hit lies where the amplified field differs
+    from the plain terrain (more than 0.75 voxel from the plain surface), its *sky*
+    the fraction of the top two rows that escape upwards, its *block* the fraction
+    of rays stopped within a fifth of the distance to the landform. Score:
+    ``min(cover, 0.45) - max(cover - 0.65, 0)`` times ``(0.5 + 0.5 sky)``, minus
+    ``block / 2``; views without sky in the top rows are dropped.
+Choice
+    The close shots are the best view of each landform in the order of
+    ``3-D volume x cover``, then further views of the best landforms (azimuths at
+    least 60 degrees apart) until there are ``count``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import trimesh
+
+from arches_render import field as F
+from arches_render.field.node import evaluate
+
+from .accessibility import RayCaster, heightfield_mesh
+from .banded import polygonize_banded
+
+__all__ = ["landform_cells", "landform_volume", "close_shots", "Shot"]
+
+_RAYS = (32, 18)
+_HEIGHTS = (1.7, 6.0, 20.0, 60.0, 150.0)
+_SPANS = (1.5, 3.0, 6.0, 12.0)
+_AZIMUTHS = 16
+
+
+class Shot(dict):
+    """A camera: ``origin``, ``target``, ``fov`` (a ``[cameras.NAME]`` table) and its
+    measures ``cover``, ``sky``, ``volume_m3``, ``height_m`` (kept out of the table)."""
+
+    def table(self):
+        """The ``[cameras.NAME]`` keys."""
+        return {"origin": [float(v) for v in self["origin"]], "target": [float(v) for v in self["target"]],
+                "fov": float(self["fov"])}
+
+
+def _primitives(root):
+    """Centres and reaches ``(N, 3), (N,)`` of every skeletal-set primitive in the tree."""
+    mids, reach = [], []
+    for n in root.walk():
+        if n.kind == "skeletal_set":
+            mids.append(0.5 * (n.a_np + n.b_np))
+            reach.append(n.radius_np + n.core_np + 0.5 * np.linalg.norm(n.b_np - n.a_np, axis=1))
+    if not mids:
+        return np.zeros((0, 3)), np.zeros(0)
+    return np.concatenate(mids), np.concatenate(reach)
+
+
+def landform_cells(root, extent, feature, cells=24):
+    """The fullest landform-sized cells of the tree's primitives.
+
+    Returns
+    -------
+    list of (numpy.ndarray, numpy.ndarray, numpy.ndarray)
+        ``(lo, hi, centroid)``: the box of the primitives' supports in the cell (clipped
+        to the tile) and the mean of their centres, fullest first.
+    """
+    P, reach = _primitives(root)
+    if not len(P):
+        return []
+    x0, y0, x1, y1 = extent
+    G = 10.0 * feature
+    key = np.floor((P[:, :2] - [x0, y0]) / G).astype(np.int64)
+    ids, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    inverse = inverse.ravel()
+    out = []
+    for k in np.argsort(-counts, kind="stable")[:cells]:
+        m = inverse == k
+        lo = (P[m] - reach[m, None]).min(axis=0)
+        hi = (P[m] + reach[m, None]).max(axis=0)
+        lo[:2] = np.maximum(lo[:2], [x0, y0])
+        hi[:2] = np.minimum(hi[:2], [x1, y1])
+        if np.all(hi > lo):
+            out.append((lo, hi, P[m].mean(axis=0)))
+    return out
+
+
+def landform_volume(root, plain, box, cells=48):
+    """3-D volume (m^3) of the landform in ``box = (lo, hi, ...)`` (module docstring) and the voxel size."""
+    lo, hi = (np.asarray(v, np.float64) for v in box[:2])
+    voxel = float(np.max(hi - lo)) / cells
+    axes = [np.arange(lo[i] + 0.5 * voxel, hi[i], voxel) for i in range(3)]
+    X, Y, Z = np.meshgrid(*axes, indexing="ij")
+    pts = np.column_stack([X.ravel(), Y.ravel(), Z.ravel()])
+    amp = evaluate(root, pts).reshape(X.shape) > 0
+    base = evaluate(plain, pts).reshape(X.shape) > 0
+    # Air with matter above it in the same column (caves, arches, undercuts).
+    above = np.flip(np.logical_or.accumulate(np.flip(amp, axis=2), axis=2), axis=2)
+    above = np.concatenate([above[..., 1:], np.zeros_like(above[..., :1])], axis=2)
+    overhang = ~amp & above
+    standing = amp & ~base  # hoodoos and other positive landforms
+    # Lowered ground (a dent, a wider channel) counts a quarter: a 2.5-D change.
+    lowered = base & ~amp & ~overhang
+    return float((overhang.sum() + standing.sum() + 0.25 * lowered.sum()) * voxel ** 3), voxel
+
+
+def _local_mesh(root, box, voxel, margin):
+    """Mesh of the amplified field in ``box`` grown by ``margin``, without the box's cut faces."""
+    lo, hi = np.asarray(box[0]) - margin, np.asarray(box[1]) + margin
+    cut = F.Box(0.5 * (lo + hi), 0.5 * (hi - lo))
+    m = polygonize_banded(F.Intersection(root, cut), voxel, normals=False)
+    V, Fc = np.asarray(m.vertices, np.float64), np.asarray(m.faces, np.int64)
+    if not len(Fc):
+        return None
+    c = V[Fc].mean(axis=1)
+    inner = np.all((c > lo + 0.75 * voxel) & (c < hi - 0.75 * voxel), axis=1)
+    if not inner.any():
+        return None
+    return trimesh.Trimesh(V, Fc[inner], process=False)
+
+
+def _rays(origin, target, fov, aspect, up=(0.0, 0.0, 1.0)):
+    o, t = np.asarray(origin, float), np.asarray(target, float)
+    fwd = (t - o) / np.linalg.norm(t - o)
+    right = np.cross(fwd, up)
+    right /= np.linalg.norm(right)
+    tup = np.cross(right, fwd)
+    tx = math.tan(math.radians(fov) / 2)
+    ty = tx / aspect
+    w, h = _RAYS
+    u = (np.arange(w) + 0.5) / w * 2 - 1
+    v = 1 - (np.arange(h) + 0.5) / h * 2
+    U, Vv = np.meshgrid(u, v)
+    d = fwd + (U * tx)[..., None] * right + (Vv * ty)[..., None] * tup
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+class _Scene:
+    """Ray casters of one landform's neighbourhood: local amplified mesh, tile DEM mesh, water."""
+
+    def __init__(self, local, tile, water):
+        self.casters = [RayCaster(m) for m in (local, tile, water) if m is not None and len(m.faces)]
+        self.local = RayCaster(local) if local is not None else None
+
+    def first_hit(self, O, D, far):
+        t = np.full(len(O), np.inf)
+        for c in self.casters:
+            t = np.minimum(t, c.hit_distance(O, D, far))
+        tl = self.local.hit_distance(O, D, far) if self.local is not None else np.full(len(O), np.inf)
+        return t, tl
+
+
+def _score(scene, plain, origins, targets, fov, aspect, voxel, dist):
+    """Scores, covers and skies of many views at once (one batch of rays)."""
+    D = np.stack([_rays(o, t, fov, aspect) for o, t in zip(origins, targets)])  # (n, h, w, 3)
+    n, h, w, _ = D.shape
+    flat = D.reshape(-1, 3)
+    O = np.repeat(np.asarray(origins, float), h * w, axis=0)
+    far = np.repeat(50.0 * np.asarray(dist, float) + 1e4, h * w)
+    t, tl = scene.first_hit(O, flat, float(far.max()))
+    hit = np.isfinite(t) & (t < far)
+    on_local = hit & (tl <= t * (1 + 1e-6))
+    differs = np.zeros(len(flat), bool)
+    if on_local.any():
+        P = O[on_local] + flat[on_local] * t[on_local, None]
+        differs[on_local] = np.abs(evaluate(plain, P)) > 0.75 * voxel
+    cover = differs.reshape(n, -1).mean(axis=1)
+    hit = hit.reshape(n, h, w)
+    sky = ((~hit[:, :2]) & (D[:, :2, :, 2] > 0)).reshape(n, -1).mean(axis=1)
+    near = (np.isfinite(t) & (t < np.repeat(0.2 * np.asarray(dist, float), h * w))).reshape(n, -1).mean(axis=1)
+    score = (np.minimum(cover, 0.45) - np.maximum(cover - 0.65, 0.0)) * (0.5 + 0.5 * sky) - 0.5 * near
+    return score, cover, sky
+
+
+def close_shots(root, plain, heights, extent, feature, water_level=None, water_mesh=None, count=3,
+                fov=50.0, aspect=16 / 9, margin=0.0, progress=None):
+    """Close shots of the most significant 3-D landforms (see the module docstring).
+
+    Parameters
+    ----------
+    root : Node
+        The amplified tree.
+    plain : Node
+        The terrain alone (``implicit_heightfield`` with its detail, no landform).
+    heights : numpy.ndarray
+        ``(ny, nx)`` DEM over ``extent`` (for the tile mesh and the ground under cameras).
+    extent : sequence of 4 floats
+    feature : float
+        Landform size ``F`` (m).
+    water_level : numpy.ndarray, optional
+        ``(ny, nx)`` water levels (NaN: dry).
+    water_mesh : trimesh.Trimesh, optional
+        Water surfaces (occluders).
+    count : int
+        Close shots wanted.
+    fov, aspect : float
+        Horizontal field of view (degrees) and image aspect.
+    margin : float
+        Cameras keep this far (m) inside the tile's border.
+    progress : callable, optional
+        ``progress(done, total)`` over landforms.
+
+    Returns
+    -------
+    list of Shot
+        Best first; fewer than ``count`` only when the tree has no landform or no view
+        of one shows sky.
+    """
+    x0, y0, x1, y1 = extent
+    H = np.asarray(heights, np.float64)
+    ny, nx = H.shape
+    dx, dy = (x1 - x0) / (nx - 1), (y1 - y0) / (ny - 1)
+    tile = heightfield_mesh(H, extent, max(1, int(math.ceil(max(nx, ny) / 512))))
+    tile_centres = tile.triangles_center
+    boxes = landform_cells(root, extent, feature)
+    vfov2 = math.atan(math.tan(math.radians(fov) / 2) / aspect)
+    found = []
+    for b, box in enumerate(boxes):
+        volume, voxel = landform_volume(root, plain, box)
+        if progress:
+            progress(b + 1, len(boxes))
+        if volume <= 0:
+            continue
+        found.append((volume, box, voxel))
+    found.sort(key=lambda x: -x[0])
+    views = []
+    for volume, box, voxel in found[:8]:
+        lo, hi, centre = box
+        size = 0.5 * float(np.linalg.norm(hi[:2] - lo[:2]))
+        grow = max(2.0 * voxel, 0.25 * size)
+        local = _local_mesh(root, box, voxel, grow)
+        # The local mesh replaces the DEM's there: the DEM's surface spans the mouths of the
+        # caves and undercuts carved under it and would hide every one of them.
+        c, m = tile_centres, grow - voxel
+        away = ~((c[:, 0] > lo[0] - m) & (c[:, 0] < hi[0] + m) & (c[:, 1] > lo[1] - m) & (c[:, 1] < hi[1] + m))
+        scene = _Scene(local, trimesh.Trimesh(tile.vertices, tile.faces[away], process=False), water_mesh)
+        # Every candidate camera at once: spans x azimuths x heights.
+        sp, az, hh = (a.ravel() for a in np.meshgrid(_SPANS, 2 * np.pi * np.arange(_AZIMUTHS) / _AZIMUTHS,
+                                                       _HEIGHTS, indexing="ij"))
+        dist = np.minimum(sp * feature, 1.5 * max(size, feature)) / math.tan(math.radians(fov) / 2)
+        ox, oy = centre[0] + dist * np.cos(az), centre[1] + dist * np.sin(az)
+        inside = (ox > x0 + margin) & (ox < x1 - margin) & (oy > y0 + margin) & (oy < y1 - margin)
+        sp, az, hh, dist, ox, oy = (a[inside] for a in (sp, az, hh, dist, ox, oy))
+        best = []
+        if len(ox):
+            ground = plain.elevation_np(ox, oy).astype(np.float64)
+            floor = ground.copy()
+            if water_level is not None:
+                wl = water_level[np.clip(np.round((oy - y0) / dy).astype(int), 0, ny - 1),
+                                 np.clip(np.round((ox - x0) / dx).astype(int), 0, nx - 1)]
+                floor = np.where(np.isfinite(wl), np.maximum(ground, wl + 0.5), ground)
+            origins = np.column_stack([ox, oy, floor + hh])
+            free = evaluate(root, origins) < -0.25  # in air, not grazing matter
+            origins, dist, az, ground = origins[free], dist[free], az[free], ground[free]
+            targets = np.repeat(centre[None], len(origins), axis=0)
+            horiz = np.hypot(*(targets[:, :2] - origins[:, :2]).T)
+            steep = np.arctan2(origins[:, 2] - targets[:, 2], horiz) > 0.6 * vfov2
+            # Looking down too steeply leaves no horizon in the frame: raise the aim.
+            targets[steep, 2] = origins[steep, 2] - math.tan(0.6 * vfov2) * horiz[steep]
+            if len(origins):
+                score, cover, sky = _score(scene, plain, origins, targets, fov, aspect, voxel, dist)
+                for k in np.nonzero(sky >= 0.5)[0]:
+                    best.append(Shot(origin=origins[k], target=targets[k], fov=fov, cover=float(cover[k]),
+                                     sky=float(sky[k]), volume_m3=volume, height_m=float(origins[k, 2] - ground[k]),
+                                     score=float(score[k]), azimuth=float(az[k]), landform=len(views)))
+        best.sort(key=lambda s: -s["score"])
+        views.append(best)
+    order = sorted(range(len(views)), key=lambda i: -(views[i][0]["volume_m3"] * views[i][0]["cover"])
+                   if views[i] else 0.0)
+    shots = [views[i][0] for i in order if views[i] and views[i][0]["cover"] > 0][:count]
+    # More views of the best landforms, azimuths at least 60 degrees apart, until there are enough.
+    for i in order:
+        for s in views[i][1:]:
+            if len(shots) >= count:
+                break
+            same = [x for x in shots if x["landform"] == s["landform"]]
+            gap = min((abs((s["azimuth"] - x["azimuth"] + math.pi) % (2 * math.pi) - math.pi) for x in same),
+                      default=math.pi)
+            if gap >= math.radians(60) and s["cover"] > 0:
+                shots.append(s)
+    return shots
