@@ -46,7 +46,7 @@ import numpy as np
 import bench_heightfield  # benchmarks/ is on sys.path as the script's folder
 import bench_production
 import bench_tracing
-from arches_render.render.renderer import build_scene, render_image
+from arches_render.render.renderer import build_scene
 from arches_render.scene import load_scene
 from arches_render.timing import REPO, median_renders, random_points, timed_eval
 

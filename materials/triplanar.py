@@ -54,7 +54,6 @@ from dataclasses import dataclass, fields
 
 import drjit as dr
 import mitsuba as mi
-import numpy as np
 
 from ..backend import variant_class
 from . import masks as M

@@ -237,7 +237,7 @@ class HeightfieldCaster:
         z0, z1 = ray_box(o, d, *self._zone)
         misses_zone = (z0 > z1) | (z1 < 0.0) | (z0 > t_end)
         t0 = dr.maximum(f_in, 0.0)
-        eps, omega0, min_cast, max_steps = self.eps, self.omega, self._min_cast, self.sphere.max_steps
+        omega0, min_cast, max_steps = self.omega, self._min_cast, self.sphere.max_steps
 
         # Exact entry/exit of the rays through the grown leaves that have one.
         spans = [_leaf_span(node, level, box, o, d) for node, level, box in self._leaves]
