@@ -378,6 +378,15 @@ def test_shipped_blocks_scenes_mesh_lies_on_the_field(name):
     v = np.asarray(mesh.vertices)
     assert len(v) > 1000
     f = F.evaluate(node, v)
-    assert np.abs(f).max() < 0.12 * node.lipschitz
+    # Distance of each vertex to the zero set, to first order |f| / |grad f| (central differences,
+    # a step far below the voxel). Marching cubes places vertices on the zero set of the trilinear
+    # interpolant: off the true surface by a small fraction of the voxel where the field is smooth,
+    # more near block edges and corners. A mesh shifted by half a voxel, or sampled on a grid
+    # offset from the one it is placed on, puts the typical vertex ~0.3 voxel off.
+    h = 1e-3
+    grad = np.stack([(F.evaluate(node, v + h * e) - F.evaluate(node, v - h * e)) / (2 * h)
+                     for e in np.eye(3)], -1)
+    dist = np.abs(f) / np.maximum(np.linalg.norm(grad, axis=-1), 1e-6) / 0.12  # in voxels
+    assert np.median(dist) < 0.02 and np.quantile(dist, 0.9) < 0.08, (np.median(dist), np.quantile(dist, 0.9))
     host = F.evaluate(node.children[0], v)
     assert np.mean(f - host > 0.05) > 0.2           # many surface points belong to blocks

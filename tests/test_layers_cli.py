@@ -92,18 +92,23 @@ BAD = [
 
 
 @pytest.mark.parametrize("old, new, key, hint", BAD)
-def test_bad_scene_values_exit_2_with_one_line(tmp_path, old, new, key, hint):
+def test_bad_scene_values_exit_2_with_one_line(tmp_path, capsys, old, new, key, hint):
+    """Each bad value, through the CLI: `info` (reads the whole scene) and `layers` (builds the
+    node): exit 2, one line naming the key and the allowed values, and no output file."""
+    from arches_render.cli import main
     assert old in SCENE
     scene = tmp_path / "s.toml"
     scene.write_text(SCENE.replace(old, new, 1))
     out = tmp_path / "x.npz"
-    variant()
-    from arches_render.scene import SceneError, load_scene
-    with pytest.raises(SceneError) as err:
-        load_scene(scene)
-    msg = str(err.value)
-    assert key in msg and hint in msg and "\n" not in msg
-    assert not out.exists()
+    commands = [["info", str(scene)]]
+    if "terrain" not in key:  # a mask of the material, which the layers command does not read
+        commands.append(["layers", str(scene), "-o", str(out), "-q"])
+    for argv in commands:
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("arches-render: error:") and "\n" not in err, (argv, err)
+        assert key in err and hint in err and str(scene) in err, (argv, err)
+        assert not out.exists()
 
 
 def test_cli_bad_scene_value_exits_2_without_output(tmp_path):
@@ -128,8 +133,20 @@ def test_cli_usage_errors(tmp_path):
 
 def test_node_option_names_a_layers_node(tmp_path, capsys):
     from arches_render.cli import main
+    from arches_render.generators.layers.material_stacks import MaterialStacks
+    # Two layers nodes: the command needs --node, refuses a name that is not one of them, and
+    # builds the one named.
+    second = SCENE.split("[nodes.land]")[1].split("[[nodes.land.operations]]")[0]
+    second = second.replace("extent = [0.0, 0.0, 8.0, 8.0]", "extent = [0.0, 0.0, 4.0, 6.0]")
     scene = tmp_path / "s.toml"
-    scene.write_text(SCENE)
-    assert main(["layers", str(scene), "-o", str(tmp_path / "x.npz"), "--node", "hill"]) == 2
-    assert "--node" in capsys.readouterr().err
-    assert np.isfinite(1.0)
+    scene.write_text(SCENE + "\n[nodes.hill]\ntype = \"sphere\"\nradius = 1.0\n[nodes.small]" + second)
+    out = tmp_path / "x.npz"
+    assert main(["layers", str(scene), "-o", str(out), "-q"]) == 2
+    assert "several layers nodes (land, small)" in capsys.readouterr().err
+    assert main(["layers", str(scene), "-o", str(out), "--node", "hill", "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "--node must name a layers node" in err and "(land, small; got 'hill')" in err
+    assert not out.exists()
+    assert main(["layers", str(scene), "-o", str(out), "--node", "small", "-q"]) == 0
+    S = MaterialStacks.load(out)
+    assert (S.nx, S.ny) == (8, 12)  # the 4 x 6 m node at 0.5 m cells, not the 8 x 8 m one

@@ -8,6 +8,7 @@ import subprocess
 import sys
 import textwrap
 
+import numpy as np
 import pytest
 
 from helpers import REPO, SCENES
@@ -113,10 +114,67 @@ def test_render_writes_exr_and_png_with_header(tmp_path):
     assert [p.name for p in out.parent.iterdir() if p.name.startswith(".")] == []
 
 
-def test_info_reports_tree(tmp_path):
-    res = run_cli("info", SCENES / "default.toml")
-    assert res.returncode == 0, res.stderr
-    assert "nodes" in res.stdout and "bounds" in res.stdout and "KiB" in res.stdout
+def _info_numbers(text):
+    """Node count, bounds (lo, hi) and Lipschitz bound as `arches-render info` prints them."""
+    import re
+    nodes = int(re.search(r"^field\s+(\d+) nodes", text, re.M).group(1))
+    b = re.search(r"^bounds\s+\[([^\]]+)\] \.\. \[([^\]]+)\] m", text, re.M)
+    lo, hi = (np.array([float(v) for v in g.split(",")]) for g in b.groups())
+    lip = float(re.search(r"^lipschitz\s+([0-9.]+)", text, re.M).group(1))
+    return nodes, lo, hi, lip
+
+
+def test_info_reports_tree_of_an_analytic_scene(tmp_path, capsys):
+    from arches_render.cli import main
+    # Union of a unit ball and a ball of radius 0.5: three nodes, a known box, Lipschitz 1.
+    scene = MINIMAL.replace('root = "ball"', 'root = "both"') + textwrap.dedent("""
+        [nodes.small]
+        type = "sphere"
+        center = [2.0, 0.0, 0.0]
+        radius = 0.5
+        [nodes.both]
+        type = "union"
+        children = ["ball", "small"]
+    """)
+    assert main(["info", str(write_scene(tmp_path, scene))]) == 0
+    nodes, lo, hi, lip = _info_numbers(capsys.readouterr().out)
+    assert nodes == 3 and lip == pytest.approx(1.0, abs=1e-3)
+    np.testing.assert_allclose(lo, [-1.0, -1.0, -0.5], atol=0.006)
+    np.testing.assert_allclose(hi, [2.5, 1.0, 1.5], atol=0.006)
+
+
+def test_info_reports_tree(capsys):
+    """The printed node count, bounds and Lipschitz bound of the default scene hold for its tree."""
+    from arches_render import field as F
+    from arches_render.cli import main
+    from arches_render.scene import load_scene
+    assert main(["info", str(SCENES / "default.toml")]) == 0
+    nodes, lo, hi, lip = _info_numbers(capsys.readouterr().out)
+    root = load_scene(SCENES / "default.toml").field
+
+    def count(n):  # every node of the tree, counted by its children (not by Node.walk)
+        return 1 + sum(count(c) for c in n.children)
+    assert nodes == count(root) > 3
+    # Bounds: the box holds all matter (f > 0 nowhere outside it) and is not loose (matter near each
+    # face: within 20 % of the box; a blend grows its children's boxes by a margin, so not at the face).
+    rng = np.random.default_rng(0)
+    size = hi - lo
+    inside = lo + rng.random((200_000, 3)) * size
+    f_in = F.evaluate(root, inside)
+    assert (f_in > 0).mean() > 0.01
+    for axis in range(3):
+        for side, face in ((0, lo[axis]), (1, hi[axis])):
+            out = inside[:20_000].copy()
+            out[:, axis] = face + (1 if side else -1) * rng.uniform(0.01, 0.5, len(out)) * size[axis]
+            assert F.evaluate(root, out).max() <= 0, (axis, side)
+            near = np.abs(inside[:, axis] - face) < 0.2 * size[axis]
+            assert (f_in[near] > 0).any(), (axis, side)
+    # Lipschitz: no pair of nearby points changes f faster than the printed bound.
+    a = inside[:50_000]
+    d = rng.normal(size=a.shape)
+    d *= (0.05 * rng.random((len(a), 1))) / np.linalg.norm(d, axis=1, keepdims=True)
+    slope = np.abs(F.evaluate(root, a + d) - f_in[:50_000]) / np.linalg.norm(d, axis=1)
+    assert slope.max() <= lip * 1.0005 + 1e-3
 
 
 def test_mesh_export(tmp_path):
@@ -148,3 +206,22 @@ def test_material_mask_errors(tmp_path):
     assert res.returncode == 2 and "materials.rock.masks[0].layer" in res.stderr and "grass" in res.stderr
     res = run_cli("info", write_scene(tmp_path, scene.replace('"moss"', '"snow"')))
     assert res.returncode == 0, res.stderr
+
+
+@pytest.mark.parametrize("voxel, says", [("5.0", ("no surface", "--voxel", "5 m")),
+                                         # refused up front by its memory estimate (robust stream)
+                                         ("0.0002", ("0.0002 m", "memory"))])
+def test_mesh_and_mesh_render_refuse_a_voxel_that_cannot_polygonize(tmp_path, capsys, voxel, says):
+    """A voxel far larger than the field's only feature (no surface sampled) or far too small (too
+    many voxels): exit 2 and one line naming the voxel, no traceback, no output."""
+    from arches_render.cli import main
+    # A small ball: at 5 m voxels the grid straddles it without a sample inside.
+    scene = write_scene(tmp_path, MINIMAL.replace("radius = 1.0", "radius = 0.3"))
+    for argv in (["mesh", str(scene), "-o", str(tmp_path / "m.ply"), "--voxel", voxel, "-q"],
+                 ["render", str(scene), "-o", str(tmp_path / "r.exr"), "--geometry", "mesh", "--voxel", voxel,
+                  "-q"]):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err.strip()
+        assert "\n" not in err and "Traceback" not in err and err.startswith("arches-render"), err
+        assert all(w in err for w in says), err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.toml"]

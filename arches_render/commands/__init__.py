@@ -18,6 +18,7 @@ API, :mod:`arches_render.scene`); it imports no command module itself.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
 from pathlib import Path
@@ -26,6 +27,7 @@ import numpy as np
 from tqdm import tqdm
 
 from ..atomic import check_writable
+from ..mesh.polygonize import PolygonizeError
 from ..resources import BASE_BYTES, check_memory, polygonize_bytes, render_bytes
 from ..scene import SceneError
 from ..scene.validate import Table
@@ -33,6 +35,20 @@ from ..scene.validate import Table
 
 class UsageError(ValueError):
     """A bad command-line value (message is the one line shown)."""
+
+
+@contextlib.contextmanager
+def voxel_errors(args, desc):
+    """Turn a field that cannot be polygonized at the chosen voxel into a :class:`UsageError`.
+
+    ``args.voxel`` (``--voxel``) or the scene's ``[render] voxel`` chose the voxel;
+    the message names the scene file and that setting.
+    """
+    try:
+        yield
+    except PolygonizeError as exc:
+        where = "--voxel" if args.voxel else ("render.voxel" if desc.render.voxel else "the default voxel")
+        raise UsageError(f"{args.scene}: {where}: {exc}") from None
 
 
 def resolution(text: str):

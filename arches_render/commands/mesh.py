@@ -20,7 +20,7 @@ from ..mesh.uv_atlas import uv_atlas
 from ..render.renderer import load_materials
 from ..scene import load_scene
 from . import (Progress, UsageError, bounded_int, check_render_memory, positive_float, scene_argument,
-               writable_output)
+               voxel_errors, writable_output)
 
 MESH_FORMATS = (".ply", ".obj", ".glb", ".usd", ".usda", ".usdc")
 
@@ -66,7 +66,8 @@ def run(args) -> int:
 
     if suffix in (".usd", ".usda", ".usdc"):
         bar = Progress("polygonize", "chunk", args.quiet)
-        chunks = polygonize_chunks(desc.field, voxel, args.chunk_cells, bar)
+        with voxel_errors(args, desc):
+            chunks = polygonize_chunks(desc.field, voxel, args.chunk_cells, bar)
         bar.close()
         pieces, textures = [], {}
         for c in chunks:
@@ -85,7 +86,8 @@ def run(args) -> int:
               f"{len(desc.meshes)} mesh instances)")
         return 0
     bar = Progress("polygonize", "slab", args.quiet)
-    tri = polygonize(desc.field, voxel, bar)
+    with voxel_errors(args, desc):
+        tri = polygonize(desc.field, voxel, bar)
     bar.close()
     if uv:
         mesh, tex = textured(tri, out.stem)

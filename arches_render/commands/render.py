@@ -21,7 +21,7 @@ from ..render.output import render_header, write_render
 from ..render.renderer import build_scene
 from ..scene import load_scene
 from . import (Progress, UsageError, bounded_int, check_render_memory, output_file, positive_float,
-               resolution, scene_argument, writable_output)
+               resolution, scene_argument, voxel_errors, writable_output)
 
 
 def register(subparsers) -> None:
@@ -86,7 +86,8 @@ def run(args) -> int:
         # Build here from the scene already loaded (generators run once; mesh mode
         # polygonizes with a bar); the job then finds the scene built.
         poly = Progress("polygonize", "slab", args.quiet) if geometry == "mesh" and desc.field else None
-        scene = build_scene(desc, geometry, width, height, args.voxel, progress=poly, aovs=aovs)
+        with voxel_errors(args, desc):
+            scene = build_scene(desc, geometry, width, height, args.voxel, progress=poly, aovs=aovs)
         if poly:
             poly.close()
         prime_cache(job, desc, scene)

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..field import Node, evaluate
-from .polygonize import BLOCK, TriangleMesh, classify_blocks, default_voxel, field_normals
+from .polygonize import BLOCK, PolygonizeError, TriangleMesh, classify_blocks, default_voxel, field_normals
 
 __all__ = ["Chunk", "polygonize_chunks", "chunk_ranges"]
 
@@ -120,5 +120,5 @@ def polygonize_chunks(node: Node, voxel: float | None = None, chunk_cells: int =
                 f = f[:, ::-1]
             chunks.append(Chunk((ix, iy), TriangleMesh(verts, f.astype(np.uint32), normals)))
     if not chunks:
-        raise ValueError("the field has no surface inside its bounds at this voxel size")
+        raise PolygonizeError(f"the field has no surface inside its bounds at voxel {voxel:g} m")
     return chunks

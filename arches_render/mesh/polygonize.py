@@ -66,6 +66,13 @@ BLOCK = 16
 MAX_VOXELS = 400_000_000
 
 
+class PolygonizeError(ValueError):
+    """The field cannot be polygonized at this voxel size (no surface, or too many voxels).
+
+    A mistake of the user's (scene or voxel size), which commands report in one line.
+    """
+
+
 def classify_blocks(node: Node, lo, voxel, nblocks):
     """Per block: 0 = may hold surface, -1 = certainly air, +1 = certainly matter."""
     variant()
@@ -98,7 +105,7 @@ def sample_grid(node: Node, voxel: float, progress=None):
     lo, hi = lo - voxel, hi + voxel
     shape = np.ceil((hi - lo) / voxel).astype(int) + 1
     if np.prod(shape) > MAX_VOXELS:
-        raise ValueError(f"voxel {voxel:g} m gives a {shape.tolist()} grid ({np.prod(shape):.3g} voxels, "
+        raise PolygonizeError(f"voxel {voxel:g} m gives a {shape.tolist()} grid ({np.prod(shape):.3g} voxels, "
                          f"at most {MAX_VOXELS:.3g}): use a larger voxel")
     nblocks = -(-shape // BLOCK)
     state = classify_blocks(node, lo, voxel, nblocks)
@@ -138,13 +145,18 @@ def polygonize(node: Node, voxel: float | None = None, progress=None) -> Triangl
     Returns
     -------
     TriangleMesh
+
+    Raises
+    ------
+    PolygonizeError
+        When the grid would exceed :data:`MAX_VOXELS` or holds no surface.
     """
     from skimage.measure import marching_cubes  # on use: slow to import (the CLI loads this module)
 
     voxel = float(voxel) if voxel else default_voxel(node)
     vol, origin = sample_grid(node, voxel, progress)
     if not (vol.max() > 0 > vol.min()):
-        raise ValueError("the field has no surface inside its bounds at this voxel size")
+        raise PolygonizeError(f"the field has no surface inside its bounds at voxel {voxel:g} m")
     verts, faces, _, _ = marching_cubes(vol, level=0.0, spacing=(voxel,) * 3)
     verts = (verts + origin).astype(np.float32)
     normals = field_normals(node, verts.astype(np.float64), 0.25 * voxel)

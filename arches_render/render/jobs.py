@@ -5,15 +5,16 @@ A :class:`RenderJob` names a scene *file* and everything that decides the pixels
 another process or machine (:mod:`arches_render.render.distributed`) and give the
 same bits there as here: serial runs and Dask workers call the same
 :func:`run_job`. A process keeps the Mitsuba scenes it built in a small cache
-(keyed by file, modification time and the settings that shape the kernels), so a
-worker that renders many frames builds and compiles once; the camera of a frame
+(keyed by the scene's inputs, :func:`scene_inputs`, and the settings that shape
+the kernels), so a worker that renders many frames builds and compiles once; an
+edit of the scene file or of any file it names builds anew. The camera of a frame
 is applied as a parameter edit (``sensor.to_world``, ``sensor.x_fov``), which
 re-uses the compiled kernels.
 """
 
 from __future__ import annotations
 
-import os
+import hashlib
 from collections import OrderedDict
 from dataclasses import dataclass, field as dc_field, replace
 from pathlib import Path
@@ -22,11 +23,12 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from .. import tomlfile
 from ..backend import set_variant
 from ..scene import load_scene, paths
 from .renderer import build_scene, render_layers, set_pixel_spread
 
-__all__ = ["RenderJob", "run_job", "clear_cache"]
+__all__ = ["RenderJob", "run_job", "clear_cache", "scene_inputs"]
 
 _CACHE: "OrderedDict[tuple, tuple]" = OrderedDict()
 _CACHE_SIZE = 4
@@ -112,8 +114,64 @@ def prime_cache(job: RenderJob, desc, scene) -> None:
 
 def _key(job: RenderJob) -> tuple:
     path = Path(job.scene).resolve()
-    return (str(path), os.stat(path).st_mtime_ns, job.width, job.height, job.geometry, job.aovs,
-            job.crop, job.voxel, job.allow)
+    return (str(path), scene_inputs(path), job.width, job.height, job.geometry, job.aovs, job.crop, job.voxel,
+            job.allow)
+
+
+def scene_inputs(path) -> str:
+    """Digest of what a scene file builds from: its text and every file it names.
+
+    Parameters
+    ----------
+    path : str or Path
+        The scene file.
+
+    Returns
+    -------
+    str
+        SHA-256 of the file's bytes and, for every string value of its TOML
+        that names an existing file (relative to the scene's folder, or
+        absolute), that file's path, size, inode and modification and change
+        times.
+
+    Notes
+    -----
+    The scene's own modification time alone misses an edit of a mesh, DEM or
+    array file it names, and a scene cached under it then renders stale
+    geometry. Every string is tried as a path, rather than the keys known to
+    take one, so that a key added later is covered without a change here.
+    Named files are identified by their metadata rather than hashed: the change
+    time (``st_ctime_ns``) moves on every write and cannot be set back by a
+    user, and hashing a large DEM for every frame would cost more than it
+    renders.
+    """
+    path = Path(path)
+    data = path.read_bytes()
+    h = hashlib.sha256(data)
+    try:
+        doc = tomlfile.loads(data.decode("utf-8"))
+    except (ValueError, UnicodeDecodeError):
+        doc = {}  # load_scene reports the error; the text digest alone keys it
+    for f in sorted(set(_named_files(doc, path.parent))):
+        st = f.stat()
+        h.update(f"\0{f}\0{st.st_size}\0{st.st_ino}\0{st.st_mtime_ns}\0{st.st_ctime_ns}".encode())
+    return h.hexdigest()
+
+
+def _named_files(value, base: Path):
+    if isinstance(value, dict):
+        for v in value.values():
+            yield from _named_files(v, base)
+    elif isinstance(value, list):
+        for v in value:
+            yield from _named_files(v, base)
+    elif isinstance(value, str) and value and "\0" not in value and len(value) < 4096:
+        try:
+            f = (base / value).resolve()
+            if f.is_file():
+                yield f
+        except (OSError, ValueError):
+            pass  # not a path this system can name
 
 
 def set_camera(scene, origin, target, up, fov) -> None:
