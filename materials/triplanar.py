@@ -23,8 +23,9 @@ compiled kernels.
 
 Besides the layer stack (each module's docstring holds its math):
 
-* textures tile without visible repetition (``layer{i}_tiling``, default
-  ``"histogram"``: Heitz and Neyret 2018, :mod:`~arches_render.materials.textures`);
+* textures tile without visible repetition (``layer{i}_tiling = "histogram"``:
+  Heitz and Neyret 2018, :mod:`~arches_render.materials.textures`; the default
+  ``"repeat"`` keeps the plain repeat, which the shipped scenes and their goldens use);
 * a procedural detail layer (``detail_*``): multi-scale noise on albedo and
   roughness and a bump from the same noise, cut off by the pixel footprint
   ``si.t * pixel_spread`` (:mod:`~arches_render.materials.detail`);
@@ -84,7 +85,7 @@ _LAYER_FLOATS = {
     "coverage": 1.0,
 }
 _LAYER_OTHER = {"texture": "", "tint": (1.0, 1.0, 1.0), "srgb": True, "normalize": True,
-                "name": "", "tiling": "histogram"}
+                "name": "", "tiling": "repeat"}
 _GLOBAL_PROPS = {"layer_count", "sharpness", "space", "pixel_spread", *DETAIL_KEYS}
 _LAYER_KEY = re.compile(r"layer(\d+)_")
 _SPACES = ("world", "object")
@@ -123,7 +124,7 @@ class Layer:
         Label for presets, overrides and AOVs.
     tiling : str
         ``'histogram'`` (random tiles, histogram-preserving blend), ``'bands'``
-        (tiles offset along u only, for banded textures) or ``'repeat'``.
+        (tiles offset along u only, for banded textures) or ``'repeat'`` (the default).
     """
 
     texture: str = ""
@@ -140,7 +141,7 @@ class Layer:
     srgb: bool = True
     normalize: bool = True
     name: str = ""
-    tiling: str = "histogram"
+    tiling: str = "repeat"
 
     def __post_init__(self):
         self.tint = tuple(float(c) for c in self.tint)

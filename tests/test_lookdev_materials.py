@@ -186,11 +186,17 @@ def _autocorrelation_peak(albedo, pos, cell=0.1, box=(-6.0, 6.0, 3.0, 15.0), max
     return float(win[np.hypot(yy, xx) >= min_lag].max())
 
 
-@pytest.mark.parametrize("look", ["shipped", "main"])
+@pytest.mark.parametrize("look", ["landscape", "main"])
 def test_ground_albedo_has_no_periodic_peak(look, tmp_path):
-    # "main" is the material as it was before this change: a repeated texture, no detail.
+    # "landscape" is the look amplify and the gallery write (histogram tiling and detail);
+    # "main" is the preset's plain look: a repeated texture, no detail.
     extra = 'detail = false\noverrides = { "rock.scale" = 2.0, "rock.tiling" = "repeat", ' \
-            '"sand.coverage" = 0.0, "grass.coverage" = 0.0, "snow.coverage" = 0.0 }' if look == "main" else ""
+            '"sand.coverage" = 0.0, "grass.coverage" = 0.0, "snow.coverage" = 0.0 }' if look == "main" else \
+            'tiling = "histogram"\ndetail = { octaves = 7, wavelength = 4.0, gain = 0.6, albedo = 0.2, ' \
+            'roughness = 0.3, bump = 0.2 }'
+    if look == "landscape":  # the table must match what amplify writes
+        from arches_render.generators.terrain.scene_writer import LANDSCAPE_LOOK
+        assert LANDSCAPE_LOOK["tiling"] == "histogram" and LANDSCAPE_LOOK["detail"]["octaves"] == 7
     text = FLAT_GROUND.replace("{extra}", extra)
     if look == "main":
         text = text.replace('overrides = { "rock.scale" = 2.0, "sand.coverage"', '# overrides', 1)

@@ -19,7 +19,8 @@ A scene file is data, never code. Top-level tables:
                  through the cameras (:mod:`arches_render.render.camera_path`),
                  rendered by ``turntable --path``
 ``[[lights]]``   ``type`` = ``sunsky`` | ``directional`` | ``point`` | ``constant`` | ``envmap``
-``[materials.NAME]`` ``type = "triplanar"`` with ``preset``, ``overrides``,
+``[materials.NAME]`` ``type = "triplanar"`` with ``preset``, ``overrides``, ``tiling`` (every
+                 layer's: ``repeat``, the default, ``histogram`` or ``bands``),
                  ``masks = [{layer, [kind], node, lo, hi}]`` (a layer's coverage times
                  ``smoothstep(lo, hi, m)``, ``m`` a field or noise node's value, the
                  cavity or the wetness) and the lookdev keys ``detail``, ``strata``,
@@ -66,6 +67,7 @@ from ..field.node import finite_box
 from ..materials import presets
 from .errors import SceneError
 from .material_keys import parse_look, parse_masks
+from ..materials.textures import TILINGS
 from .mesh_files import read_mesh
 from .nodes import NodeBuilder
 from .paths import scene_file
@@ -304,6 +306,12 @@ def _material(t: Table, builder) -> tuple[dict, list, dict]:
         except ValueError as exc:
             raise t.error("overrides" if over else "preset", str(exc)) from None
         names = [layer.name for layer in layers]
+        # Every layer's tiling at once (a layer's own override wins); the presets repeat
+        # their textures, as before the histogram-preserving blend existed.
+        tiling = t.string("tiling", None, choices=set(TILINGS))
+        for i, layer in enumerate(layers):
+            if tiling is not None and f"{layer.name}.tiling" not in over:
+                d[f"layer{i}_tiling"] = tiling
         nodes = parse_look(t, builder, names, d)
         masks = parse_masks(t, builder, names, d)
     t.finish()
