@@ -130,9 +130,11 @@ def test_atomic_helpers(tmp_path):
         assert tmp.suffix == ".png" and tmp.name.startswith(".img.tmp-")
         tmp.write_bytes(b"by name")
     assert out.read_bytes() == b"by name" and _leftovers(tmp_path) == []
-    with pytest.raises(FileNotFoundError):
+    from arches_render.atomic import OutputError
+    with pytest.raises(OutputError, match="did not produce") as exc:  # one line naming the output
         with atomic_path(tmp_path / "none.png") as tmp:
             tmp.unlink()  # a writer that produced nothing
+    assert "none.png" in str(exc.value)
     assert not (tmp_path / "none.png").exists() and _leftovers(tmp_path) == []
     with pytest.raises(ValueError):
         with atomic_write(target, "rb"):
