@@ -154,6 +154,7 @@ install_project "$extra"
 
 if [[ $mode == demo ]]; then
     say "arches-render render scenes/default.toml -o out/default.exr${*:+ $*}"
+    mkdir -p out  # render refuses an output folder that does not exist
     exec "$VENV/bin/arches-render" render scenes/default.toml -o out/default.exr "$@"
 else
     say "python -m pytest -q${*:+ $*}"
