@@ -177,5 +177,5 @@ def test_lakes_at_spill_level_and_no_flooded_canyon_floor():
     ring = (r > 0.28) & (r < 0.32)
     assert H[ring].min() - 1.0 < level <= H[ring].min() + 1e-6  # where the rim is lowest: it spills
     # The flat floor of the real canyon has resampling pits of 1-4 m: no lake there.
-    canyon = np.load(REPO / "scenes" / "data" / "real_nm_canyon_10m.npy")
+    canyon = np.load(REPO / "scenes" / "data" / "real_nm_canyon_10m.npy", allow_pickle=False)
     assert find_water(canyon, 0.0).lakes == []
