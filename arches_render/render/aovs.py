@@ -14,8 +14,18 @@ layer            channels                  value (0 where the ray escapes)
 ``depth``        Z                         distance from the camera centre to the hit, metres
 ``position``     X, Y, Z                   world position of the hit, metres
 ``coverage``     field, mesh               1 where the hit is on the field / on a mesh
+``steps``        N                         steps of the field tracer along the camera ray
+                                           (sphere steps and mipmap cells; also on misses:
+                                           a ray that proved its way free has steps too)
 ``layers``       one per material layer    composite weight ``w_i`` of each layer of the
                                            field's triplanar material (sums to 1 on the field)
+``exhausted``    primary, bounce, shadow   rays of the pixel's paths (per sample) that used up
+                                           the field tracer's first step budget and took its
+                                           second (:mod:`arches_render.render.sphere_tracer`);
+                                           with a traced field only
+``unresolved``   primary, bounce, shadow   rays that used up the second budget too, resolved
+                                           conservatively (a hit at the last point, a shadow
+                                           ray occluded): a bug to find, never a silent miss
 ``transmittance`` R, G, B                  with an ``[atmosphere]``: transmittance ``Tr`` of
                                            the camera ray up to its hit (misses: up to where
                                            it leaves the scene box), 1 without fog
@@ -47,14 +57,17 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-__all__ = ["BASE_LAYERS", "ATMOSPHERE_LAYERS", "aov_channel_names", "primary_aovs", "split_channels", "layer_names_of"]
+__all__ = ["BASE_LAYERS", "RAY_COUNT_KINDS", "ray_count_header", "ATMOSPHERE_LAYERS", "aov_channel_names", "primary_aovs", "split_channels", "layer_names_of"]
+
+#: Kinds of rays counted in the ``exhausted`` and ``unresolved`` layers (their channels).
+RAY_COUNT_KINDS = ("primary", "bounce", "shadow")
 
 #: Layers of renders with an atmosphere, after the material layers (in this order).
 ATMOSPHERE_LAYERS = (("transmittance", ("R", "G", "B")), ("beauty_clear", ("R", "G", "B")))
 
 #: Layers every AOV render has, with their channel letters.
 BASE_LAYERS = (("albedo", ("R", "G", "B")), ("normal", ("X", "Y", "Z")), ("depth", ("Z",)),
-               ("position", ("X", "Y", "Z")), ("coverage", ("field", "mesh")))
+               ("position", ("X", "Y", "Z")), ("coverage", ("field", "mesh")), ("steps", ("N",)))
 
 
 def layer_names_of(bsdf) -> list[str]:
@@ -63,7 +76,7 @@ def layer_names_of(bsdf) -> list[str]:
     return list(names) if names and hasattr(bsdf, "layer_weights") else []
 
 
-def aov_channel_names(field_bsdf=None, atmosphere: bool = False) -> list[str]:
+def aov_channel_names(field_bsdf=None, atmosphere: bool = False, field: bool = False) -> list[str]:
     """Film channel names (``layer.channel``) in the order of :func:`primary_aovs`.
 
     Parameters
@@ -72,6 +85,8 @@ def aov_channel_names(field_bsdf=None, atmosphere: bool = False) -> list[str]:
         The field's BSDF; a triplanar one adds a ``layers.<name>`` channel per layer.
     atmosphere : bool
         Whether the render has an atmosphere (adds :data:`ATMOSPHERE_LAYERS`).
+    field : bool
+        Whether a field is traced (adds the ``exhausted`` and ``unresolved`` ray counts).
 
     Returns
     -------
@@ -81,10 +96,12 @@ def aov_channel_names(field_bsdf=None, atmosphere: bool = False) -> list[str]:
     out += [f"layers.{n}" for n in layer_names_of(field_bsdf)]
     if atmosphere:
         out += [f"{layer}.{c}" for layer, letters in ATMOSPHERE_LAYERS for c in letters]
+    if field:
+        out += [f"{layer}.{k}" for layer in ("exhausted", "unresolved") for k in RAY_COUNT_KINDS]
     return out
 
 
-def primary_aovs(si, field_hit, valid, bsdf, field_bsdf=None, depth=None) -> list:
+def primary_aovs(si, field_hit, valid, bsdf, field_bsdf=None, depth=None, steps=None) -> list:
     """AOV values of a primary hit, one ``mi.Float`` per channel of :func:`aov_channel_names`.
 
     Parameters
@@ -102,6 +119,8 @@ def primary_aovs(si, field_hit, valid, bsdf, field_bsdf=None, depth=None) -> lis
     depth : mi.Float, optional
         Distance from the camera centre (default ``si.t``, the distance from
         the ray origin, which a perspective camera puts on its near plane).
+    steps : mi.Float, optional
+        Steps the field tracer took on the ray (default 0).
 
     Returns
     -------
@@ -114,7 +133,8 @@ def primary_aovs(si, field_hit, valid, bsdf, field_bsdf=None, depth=None) -> lis
     p = dr.select(valid, si.p, mi.Point3f(0.0))
     on_field = valid & field_hit
     out = [albedo.x, albedo.y, albedo.z, n.x, n.y, n.z, t, p.x, p.y, p.z,
-           dr.select(on_field, 1.0, zero), dr.select(valid & ~field_hit, 1.0, zero)]
+           dr.select(on_field, 1.0, zero), dr.select(valid & ~field_hit, 1.0, zero),
+           zero if steps is None else mi.Float(steps)]
     if layer_names_of(field_bsdf):
         out += [dr.select(on_field, w, zero) for w in field_bsdf.layer_weights(si, on_field)]
     return out
@@ -146,3 +166,32 @@ def split_channels(image: np.ndarray, aov_names) -> tuple[np.ndarray, dict]:
         arrs.append(image[..., 3 + i])
         letters.append(letter)
     return image[..., :3], {k: (np.stack(a, axis=-1), tuple(c)) for k, (a, c) in layers.items()}
+
+
+def ray_count_header(layers: dict, spp: int) -> dict:
+    """EXR header entries with the image's counts of exhausted and unresolved rays.
+
+    Parameters
+    ----------
+    layers : dict
+        AOV layers of a render (:func:`split_channels`); without ``exhausted`` and
+        ``unresolved`` (no traced field, or no AOVs) nothing is counted.
+    spp : int
+        Samples per pixel (the layers hold per-sample means).
+
+    Returns
+    -------
+    dict of str to int
+        ``rays_exhausted_KIND`` (rays that needed the tracer's second pass) and
+        ``rays_unresolved_KIND`` (rays left after it, resolved as hits), for each
+        kind of :data:`RAY_COUNT_KINDS`; empty without those layers.
+    """
+    out = {}
+    for layer in ("exhausted", "unresolved"):
+        if layer not in layers:
+            return {}
+        arr, letters = layers[layer]
+        arr = np.asarray(arr, np.float64).reshape(arr.shape[0], arr.shape[1], -1)
+        for i, kind in enumerate(letters):
+            out[f"rays_{layer}_{kind}"] = int(round(float(arr[..., i].sum()) * int(spp)))
+    return out

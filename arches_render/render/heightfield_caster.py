@@ -64,7 +64,11 @@ import mitsuba as mi
 import numpy as np
 
 from ..field.heightfield_mipmap import MaxMipmap, heightfield_cast_plan
-from .sphere_tracer import SphereTracer, ray_box
+from .sphere_tracer import SECOND_PASS_FACTOR, SphereTracer, TraceResult, ray_box
+
+
+#: Rounds of the hybrid loop (cast, probe, near) after which a ray is unresolved.
+MAX_ROUNDS = 4096
 
 
 def make_tracer(field, eps=2e-4, omega=1.6, max_steps=512, cast=True):
@@ -141,6 +145,16 @@ class HeightfieldCaster:
             self._min_cast = dr.opaque(mi.Float, 0.125 * self.far_level)
 
     # -- public queries ------------------------------------------------------------
+    def query(self, o, d, tmax, active, cone=None, any_hit=False):
+        """Ray queries with step counts and budgets (:meth:`SphereTracer.query`);
+        ``any_hit``: stop at the first certain hit (shadow rays).
+
+        Returns
+        -------
+        TraceResult
+        """
+        return self._query(o, d, tmax, active, any_hit=any_hit, cone=cone)
+
     def trace(self, o, d, tmax, active, cone=None):
         """First hit of the rays ``o + t d`` (``|d| = 1``) with ``0 <= t <= tmax``;
         ``cone``: each lane's ray cone (:meth:`SphereTracer.trace`), used by the sphere
@@ -151,12 +165,13 @@ class HeightfieldCaster:
         (mi.Bool, mi.Float)
             Hit mask and distance.
         """
-        return self._query(o, d, tmax, active, any_hit=False, cone=cone)
+        r = self._query(o, d, tmax, active, any_hit=False, cone=cone)
+        return r.hit, r.t
 
     def occluded(self, o, d, tmax, active, cone=None):
         """Whether the segments ``o + t d``, ``0 <= t <= tmax``, meet matter (stops at
         the first certain hit)."""
-        return self._query(o, d, tmax, active, any_hit=True, cone=cone)[0]
+        return self._query(o, d, tmax, active, any_hit=True, cone=cone).hit
 
     def tolerance(self, t, cone=None):
         """Hit tolerance of the sphere steps (:meth:`SphereTracer.tolerance`)."""
@@ -229,7 +244,7 @@ class HeightfieldCaster:
             state = (Float(ta), Float(tb), *start(ta), Bool(False), Float(inf),
                      active & (ta <= tb), Bool(False), UInt(0))
             out = dr.while_loop(state, lambda *s: s[7], cast, label="heightfield_cast")
-            return out[5] & active, out[6]
+            return TraceResult.of(out[5], out[6], out[9], Bool(False), active, self.sphere.max_steps)
 
         CAST, PROBE, NEAR = UInt(0), UInt(1), UInt(2)
         f_in, f_out = ray_box(o, d, self.sphere.lo_op, self.sphere.hi_op)
@@ -238,6 +253,7 @@ class HeightfieldCaster:
         misses_zone = (z0 > z1) | (z1 < 0.0) | (z0 > t_end)
         t0 = dr.maximum(f_in, 0.0)
         omega0, min_cast, max_steps = self.omega, self._min_cast, self.sphere.max_steps
+        budget = max_steps * (1 + SECOND_PASS_FACTOR)
 
         # Exact entry/exit of the rays through the grown leaves that have one.
         spans = [_leaf_span(node, level, box, o, d) for node, level, box in self._leaves]
@@ -264,10 +280,11 @@ class HeightfieldCaster:
             return (cert >= min_cast, seg_end, dr.maximum(t_seg, ta), dr.minimum(seg_end, tb),
                     near_end)
 
-        def near(t, t_prev, r_prev, step, omega, found, t_hit, alive, leave, near_end, i):
-            """One over-relaxed sphere step on the full field (as :class:`SphereTracer`,
-            with its step budget: a lane that exhausts it is a miss); past ``near_end``,
-            a long free step hands the lane back to probing at its verified end."""
+        def near(t, t_prev, r_prev, step, omega, found, t_hit, alive, leave, near_end, steps):
+            """One over-relaxed sphere step on the full field (as :class:`SphereTracer`;
+            ``steps`` counts every sphere step of the ray, against its budgets); past
+            ``near_end``, a long free step hands the lane back to probing at its
+            verified end."""
             f, (r,) = self.field.eval_bounds(o + d * t, (0.0,), d, self.sphere.footprint(cone, t))
             failed = (omega > 1.0) & (r + r_prev < step)
             new_hit = ~failed & ((-f < self.sphere.tolerance(t, cone)) | (f >= 0.0))
@@ -276,15 +293,15 @@ class HeightfieldCaster:
             t_next = dr.select(leave, t + r, t_next)
             step = dr.select(failed, r_prev, t_next - t)
             t_prev, r_prev = dr.select(failed, t_prev, t), dr.select(failed, r_prev, r)
-            omega = dr.select(failed, 1.0, omega)
+            omega = dr.select(failed, 1.0, omega0)  # relaxation resumes after a safe step
             done = ~failed & ~new_hit & ~leave & (t >= t_end)
             found = found | (alive & new_hit)
             t_hit = dr.select(alive & new_hit, t, t_hit)
             t = dr.select(new_hit, t, t_next)
-            alive = alive & (~new_hit & ~done & ~leave & (i + 1 < max_steps))
-            return t, t_prev, r_prev, step, omega, found, t_hit, alive, leave, near_end, i + 1
+            alive = alive & ~new_hit & ~done & ~leave
+            return t, t_prev, r_prev, step, omega, found, t_hit, alive, leave, near_end, steps + 1
 
-        def outer(t, t_hi, t_seg, mode, found, t_hit, alive, it):
+        def outer(t, t_hi, t_seg, mode, found, t_hit, alive, it, steps):
             # CAST: finish the current stretch.
             c = dr.while_loop((t, t_hi, *start(t), found, t_hit, alive & (mode == CAST),
                                Bool(False), UInt(0)), lambda *s: s[7], cast, label="hf_cast")
@@ -305,21 +322,29 @@ class HeightfieldCaster:
             # NEAR: sphere steps from t_seg until a step is long again.
             nearing = alive & (mode == NEAR)
             n = dr.while_loop((Float(t_seg), Float(t_seg), Float(0.0), Float(0.0), Float(omega0), found, t_hit,
-                               nearing, Bool(False), near_end, UInt(0)), lambda *s: s[7], near,
-                           label="hf_near")
+                               nearing, Bool(False), near_end, UInt(steps)),
+                              lambda *s: s[7] & (s[10] < budget), near, label="hf_near")
             found, t_hit = n[5], n[6]
+            steps = dr.select(nearing, n[10], steps)
             t_seg = dr.select(nearing, n[0], t_seg)
             mode = dr.select(nearing & n[8], PROBE, mode)
-            alive = alive & (~found & ~(nearing & ~n[8]))
-            return t, t_hi, t_seg, mode, found, t_hit, alive & (it + 1 < 4096), it + 1
+            # A lane still stepping (n[7]) ran out of steps: it stays alive, and
+            # the outer loop's condition ends it as unresolved.
+            alive = alive & (~found & ~(nearing & ~n[8] & ~n[7]))
+            return t, t_hi, t_seg, mode, found, t_hit, alive, it + 1, steps
 
         # Rays that miss the zone are one cast; the others start by probing.
         mode0 = dr.select(misses_zone, CAST, PROBE)
         state = (Float(dr.select(misses_zone, ta, t0)), Float(dr.select(misses_zone, tb, t0)),
                  Float(dr.select(misses_zone, t_end, t0)), UInt(mode0), Bool(False), Float(inf),
-                 active & dr.select(misses_zone, ta <= tb, t0 <= t_end), UInt(0))
-        out = dr.while_loop(state, lambda *s: s[6], outer, label="heightfield_hybrid")
-        return out[4] & active, out[5]
+                 active & dr.select(misses_zone, ta <= tb, t0 <= t_end), UInt(0), UInt(0))
+        out = dr.while_loop(state, lambda *s: s[6] & (s[8] < budget) & (s[7] < MAX_ROUNDS), outer,
+                            label="heightfield_hybrid")
+        # Lanes still alive used up their steps or rounds: unresolved, a hit at
+        # their last point (ray_stats), never a miss.
+        t_last = dr.select(out[3] == NEAR, out[2], out[0])
+        return TraceResult.of(out[4], dr.select(out[4], out[5], t_last), out[8] + out[7], out[6], active,
+                              max_steps)
 
     def _cast_step(self, o, d, any_hit):
         """The body of the traversal loop for rays ``o + t d`` (module docstring).

@@ -66,7 +66,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..backend import variant_class
-from .aovs import aov_channel_names, primary_aovs
+from .aovs import RAY_COUNT_KINDS, aov_channel_names, primary_aovs
 from .heightfield_caster import make_tracer
 from .sphere_tracer import position_ulps
 
@@ -129,18 +129,33 @@ class _ImplicitPathImpl:
         if not self.lod or not getattr(ray, "has_differentials", False):
             return None
         # Mitsuba scaled the differentials by 1/sqrt(spp): back to the pixel's size.
-        scale = 0.5 * dr.sqrt(mi.Float(sampler.sample_count()))
+        # Opaque: a new pass size must not recompile the kernel.
+        scale = 0.5 * dr.sqrt(dr.opaque(mi.Float, sampler.sample_count()))
         spread = dr.maximum(dr.norm(ray.d_x - ray.d), dr.norm(ray.d_y - ray.d)) * scale
         return mi.Float(0.0), mi.Float(spread)
 
     def intersect(self, scene, ray, active, cone=None):
-        """Nearest hit among meshes and the field; returns ``(si, is_field_hit)``;
-        ``cone``: the rays' cones (module docstring) or None."""
+        """Nearest hit among meshes and the field.
+
+        Parameters
+        ----------
+        scene, ray, active
+            The scene, the rays and their lanes.
+        cone : (mi.Float, mi.Float), optional
+            The rays' cones (module docstring).
+
+        Returns
+        -------
+        (mi.SurfaceInteraction3f, mi.Bool, TraceResult or None)
+            The hit, whether it is on the field, and the field query's result
+            (:class:`~.sphere_tracer.TraceResult`; None without a field).
+        """
         si = scene.ray_intersect(ray, mi.RayFlags.All, coherent=False, active=active)
         if self.tracer is None:
-            return si, mi.Bool(False)
+            return si, mi.Bool(False), None
         tmax = dr.select(si.is_valid(), si.t, ray.maxt)
-        hit, t = self.tracer.trace(ray.o, ray.d, tmax, active, cone)
+        res = self.tracer.query(ray.o, ray.d, tmax, active, cone)
+        hit, t = res.hit, res.t
         p, n = self.tracer.surface(ray.o + ray.d * t, t, ray.d, cone)
         # Lift the point off the surface so that rays spawned here start in air: a
         # tenth of the hit tolerance, at least a few float32 ulps of the position (a
@@ -155,14 +170,16 @@ class _ImplicitPathImpl:
         sf.time = ray.time
         sf.wavelengths = ray.wavelengths
         si = dr.select(hit, sf, si)
-        return si, hit
+        return si, hit, res
 
     def occluded(self, scene, ray, active, cone=None):
-        """Shadow-ray test against meshes and the field (``cone`` as for :meth:`intersect`)."""
+        """Shadow-ray test against meshes and the field (``cone`` as for :meth:`intersect`);
+        returns ``(blocked, TraceResult or None)``."""
         blocked = scene.ray_test(ray, active)
-        if self.tracer is not None:
-            blocked |= self.tracer.occluded(ray.o, ray.d, ray.maxt, active & ~blocked, cone)
-        return blocked
+        if self.tracer is None:
+            return blocked, None
+        res = self.tracer.query(ray.o, ray.d, ray.maxt, active & ~blocked, cone, any_hit=True)
+        return blocked | res.hit, res
 
     def bsdf_at(self, si, ray, field_hit):
         if self.tracer is None:
@@ -174,7 +191,6 @@ class _ImplicitPathImpl:
         bsdf_ctx = mi.BSDFContext()
         cone0 = self.camera_cone(sampler, ray)  # before the differentials are dropped
         ray = mi.Ray3f(ray)
-        ray0, active0 = mi.Ray3f(ray), mi.Bool(active)
         L = mi.Spectrum(0.0)
         beta = mi.Spectrum(1.0)
         eta = mi.Float(1.0)
@@ -188,21 +204,33 @@ class _ImplicitPathImpl:
         # The fog-free radiance and throughput of the same path (AOV beauty_clear).
         clear = (mi.Spectrum(0.0), mi.Spectrum(1.0)) if atm is not None and self.aovs else ()
         cone = () if cone0 is None else cone0
+        # AOVs of the first vertex (primary hit), recorded in the loop.
+        aov = tuple(mi.Float(0.0) for _ in range(self.primary_aov_count())) if self.aovs else ()
+        # Rays of the path that exhausted / were unresolved, by kind (AOVs too).
+        counts = tuple(mi.Float(0.0) for _ in range(2 * len(RAY_COUNT_KINDS))) if aov and self.tracer else ()
 
         def cond(*state):
             return state[-1]
 
         def body(ray, L, beta, eta, depth, valid_ray, prev_si, prev_bsdf_pdf, prev_bsdf_delta, clear,
-                 cone, active):
-            si, field_hit = self.intersect(scene, ray, active, cone or None)
+                 cone, aov, counts, active):
+            primary = depth == 0  # lanes whose ray left the camera (a miss ends a path)
+            si, field_hit, res = self.intersect(scene, ray, active, cone or None)
             # The cone at the hit: shadow rays keep its spread, bounces widen it.
             hit_cone = (cone[0] + cone[1] * dr.select(si.is_valid(), si.t, 0.0), cone[1]) if cone else None
             if clear:
                 L_c, beta_c = clear
+            tr = None
             if atm is not None:
                 tr, L_in = atm.segment(ray.o, ray.d, atm.segment_length(ray, si))
                 L = dr.select(active, L + beta * L_in, L)
                 beta = dr.select(active, beta * tr, beta)
+            if aov:
+                steps = res.steps if res is not None else mi.UInt32(0)
+                aov = self.record_aovs(scene, ray, si, field_hit, steps, tr, active & primary, aov)
+            if counts:
+                counts = count_rays(counts, 0, res, active & primary)
+                counts = count_rays(counts, 1, res, active & ~primary)
 
             # Emission reached by BSDF sampling (environment or area light), MIS-weighted.
             ds = mi.DirectionSample3f(scene, si, prev_si)
@@ -226,7 +254,10 @@ class _ImplicitPathImpl:
             active_em &= ds.pdf != 0.0
             shadow = si.spawn_ray_to(ds.p)
             shadow.maxt = dr.select(ds.delta | (ds.dist < dr.inf), shadow.maxt, dr.inf)
-            active_em &= ~self.occluded(scene, shadow, active_em, hit_cone)
+            blocked, res = self.occluded(scene, shadow, active_em, hit_cone)
+            if counts:
+                counts = count_rays(counts, 2, res, active_em)
+            active_em &= ~blocked
             wo = si.to_local(ds.d)
             bsdf_val, bsdf_pdf = bsdf.eval_pdf(bsdf_ctx, si, wo, active_em)
             mis_em = dr.select(ds.delta, 1.0, mis_weight(ds.pdf, bsdf_pdf))
@@ -265,42 +296,69 @@ class _ImplicitPathImpl:
             rr_continue = sampler.next_1d() < rr_prob
             active_next &= ~rr_active | rr_continue
             return (ray, L, beta, eta, depth, valid_ray, prev_si, prev_bsdf_pdf, prev_bsdf_delta, clear,
-                    cone, active_next)
+                    cone, aov, counts, active_next)
 
         state = dr.while_loop((ray, L, beta, eta, depth, valid_ray, prev_si, prev_bsdf_pdf,
-                               prev_bsdf_delta, clear, cone, active), cond, body, label="implicit_path")
+                               prev_bsdf_delta, clear, cone, aov, counts, active), cond, body,
+                              label="implicit_path")
         L, valid_ray = state[1], state[5]
         if not self.aovs:
             return L, valid_ray, []
-        aovs = self.primary_aovs(scene, ray0, active0, cone0)
+        aovs = list(state[11])
         if atm is not None:
             L_c = state[9][0]
             aovs += [L_c.x, L_c.y, L_c.z]
-        return L, valid_ray, aovs
+        return L, valid_ray, aovs + list(state[12])
 
-    def primary_aovs(self, scene, ray, active, cone=None):
-        """AOV values of the primary hit, in the order of :meth:`aov_names`."""
-        si, field_hit = self.intersect(scene, ray, active, cone)
-        valid = mi.Bool(active) & si.is_valid()
-        bsdf = self.bsdf_at(si, ray, field_hit)
+    def primary_aov_count(self):
+        """Channels that :meth:`record_aovs` fills (all but the ray counts and ``beauty_clear``)."""
+        counted = 2 * len(RAY_COUNT_KINDS) if self.tracer is not None else 0
+        return len(self.aov_names()) - counted - (3 if self.atmosphere is not None else 0)
+
+    def record_aovs(self, scene, ray, si, field_hit, steps, tr, first, old):
+        """The AOV values of the camera rays' hits (lanes ``first``), in the order of
+        :meth:`aov_names`; ``old`` elsewhere. ``steps``: the field trace's steps;
+        ``tr``: the camera segment's transmittance (None without an atmosphere).
+
+        Recorded at the path's first vertex, so no second primary trace is
+        needed; packets without a first-vertex lane skip the shading it takes."""
+        field_bsdf = self.field_bsdf if self.tracer else None
         # Perspective cameras start rays on the near plane: measure depth from the
         # camera centre instead, at the unlifted hit point.
         centre = scene.sensors()[0].world_transform().translation()
-        depth = dr.norm(ray.o + ray.d * si.t - centre)
-        out = primary_aovs(si, field_hit, valid, bsdf, self.field_bsdf if self.tracer else None, depth)
-        if self.atmosphere is not None:
-            tr = self.atmosphere.transmittance(ray.o, ray.d, self.atmosphere.segment_length(ray, si))
-            out += [tr.x, tr.y, tr.z]
-        return out
+        extra = () if tr is None else (tr,)
+
+        def compute(si, field_hit, steps, first, *extra):
+            valid = first & si.is_valid()
+            bsdf = self.bsdf_at(si, ray, field_hit)
+            depth = dr.norm(ray.o + ray.d * si.t - centre)
+            out = primary_aovs(si, field_hit, valid, bsdf, field_bsdf, depth, mi.Float(steps))
+            if extra:
+                out += [extra[0].x, extra[0].y, extra[0].z]
+            return tuple(dr.select(first, v, o) for v, o in zip(out, old))
+
+        return dr.if_stmt((si, field_hit, steps, first, *extra), first, compute,
+                          lambda *args: tuple(mi.Float(o) for o in old), label="first_vertex_aovs")
 
     def aov_names(self):
         if not self.aovs:
             return []
-        return aov_channel_names(self.field_bsdf if self.tracer else None, self.atmosphere is not None)
+        return aov_channel_names(self.field_bsdf if self.tracer else None, self.atmosphere is not None,
+                                 self.tracer is not None)
 
     def to_string(self):
         return (f"ImplicitPathIntegrator[max_depth={self.max_depth}, rr_depth={self.rr_depth}, "
                 f"field={'attached' if self.tracer else 'none'}]")
+
+
+def count_rays(counts, kind, res, lanes):
+    """Add the lanes ``lanes`` of the query ``res`` to the ``exhausted`` and
+    ``unresolved`` counters of ray kind ``kind`` (an index of ``RAY_COUNT_KINDS``)."""
+    n = len(RAY_COUNT_KINDS)
+    out = list(counts)
+    out[kind] = out[kind] + dr.select(lanes & res.exhausted, 1.0, 0.0)
+    out[n + kind] = out[n + kind] + dr.select(lanes & res.unresolved, 1.0, 0.0)
+    return tuple(out)
 
 
 def integrator_class():

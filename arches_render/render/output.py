@@ -18,6 +18,7 @@ import numpy as np
 
 from .. import __version__
 from ..imaging.exr import ExrError, read_exr, write_exr
+from .aovs import ray_count_header
 
 __all__ = ["render_header", "write_render", "is_complete", "IDENTITY_KEYS"]
 
@@ -74,7 +75,10 @@ def write_render(path, rgb, layers=None, header=None, denoised=None) -> Path:
     layers : dict, optional
         AOV layers ``{name: (array, letters)}``.
     header : dict, optional
-        See :func:`render_header`; the AOV layer names are added as ``aovs``.
+        See :func:`render_header`; the AOV layer names are added as ``aovs``, and
+        with the ``exhausted``/``unresolved`` layers the image's counts of rays
+        that needed the tracer's second pass or were left after it
+        (:func:`~arches_render.render.aovs.ray_count_header`, from ``spp``).
     denoised : numpy.ndarray, optional
         Denoised beauty, stored as layer ``denoised``.
 
@@ -87,6 +91,7 @@ def write_render(path, rgb, layers=None, header=None, denoised=None) -> Path:
         layers["denoised"] = (np.asarray(denoised, np.float32), ("R", "G", "B"))
     header = dict(header or {})
     header["aovs"] = " ".join(sorted(layers))
+    header.update({k: str(v) for k, v in ray_count_header(layers, int(header.get("spp", 1))).items()})
     return write_exr(path, rgb, header=header, layers=layers, half=False)
 
 

@@ -225,7 +225,8 @@ def build_scene(desc, geometry=None, width=None, height=None, voxel=None, progre
         scene = mi.load_dict(d)
     else:
         d["integrator"] = {"type": "implicit_path", "max_depth": s.max_depth, "rr_depth": s.rr_depth,
-                           "eps": s.eps, "omega": s.omega, "aovs": bool(aovs)}
+                           "eps": s.eps, "omega": s.omega, "max_steps": s.max_steps,
+                           "aovs": bool(aovs)}
         scene = mi.load_dict(d)
         scene.integrator().attach(desc.field, field_bsdf)
     # Clip planes for the whole scene, meshes included (a far-field ring reaches the

@@ -33,6 +33,8 @@ sphere tracing. STAG 2014, 1-8.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import drjit as dr
 import mitsuba as mi
 import numpy as np
@@ -48,6 +50,41 @@ from ..field.node import finite_box
 #: mean of the boulders scene against its mesh by 0.75 %). Bounce rays, whose cones
 #: are wide, stop much earlier.
 CONE_TOLERANCE = 0.05
+
+#: A ray that exhausts ``max_steps`` goes on for this many times more steps.
+SECOND_PASS_FACTOR = 16
+
+
+@dataclass
+class TraceResult:
+    """What a ray query found, per lane.
+
+    Attributes
+    ----------
+    hit : mi.Bool
+        A surface was met (unresolved rays included: they are conservative hits).
+    t : mi.Float
+        Distance of the hit (of the last point for unresolved rays).
+    steps : mi.UInt32
+        Loop iterations the ray took.
+    exhausted : mi.Bool
+        The ray used up its first budget (``max_steps``).
+    unresolved : mi.Bool
+        The ray used up the second budget too and was resolved as a hit.
+    """
+
+    hit: object
+    t: object
+    steps: object
+    exhausted: object
+    unresolved: object
+
+    @classmethod
+    def of(cls, hit, t, steps, alive, active, max_steps):
+        """The result of a loop that ended with ``alive`` lanes still unresolved."""
+        unresolved = mi.Bool(alive) & active
+        return cls(hit=(mi.Bool(hit) | unresolved) & active, t=t, steps=steps,
+                   exhausted=active & (steps > max_steps) | unresolved, unresolved=unresolved)
 
 
 def position_ulps(p, ulps):
@@ -86,7 +123,9 @@ class SphereTracer:
     omega : float
         Over-relaxation factor in ``[1, 2)``.
     max_steps : int
-        Step budget per ray; a ray that exhausts it is reported as a miss.
+        First step budget per ray; an *exhausted* ray gets ``SECOND_PASS_FACTOR``
+        times more, and one that spends those too is resolved as a hit
+        (:meth:`query`).
     """
 
     def __init__(self, field, eps=2e-4, omega=1.6, max_steps=512):
@@ -123,8 +162,18 @@ class SphereTracer:
         """The :class:`~arches_render.field.lod.Footprint` of ``cone`` at ``t`` (None: none)."""
         return None if cone is None else Footprint.on_ray(cone[0], cone[1], t)
 
-    def trace(self, o, d, tmax, active, cone=None):
-        """First hit of the rays ``o + t d`` (``|d| = 1``) with ``0 <= t <= tmax``.
+    def query(self, o, d, tmax, active, cone=None, any_hit=False):
+        """First hit of the rays ``o + t d`` (``|d| = 1``) with ``0 <= t <= tmax``, with
+        the ray's step count and whether it used up its budgets.
+
+        A ray that has neither found a hit nor proved ``[t_start, t_end]`` free after
+        ``max_steps`` steps is *exhausted* and goes on for up to
+        ``SECOND_PASS_FACTOR * max_steps`` more; one that spends those too is
+        *unresolved* and reported as a hit at its last point (for a shadow ray:
+        occluded), never as a miss (:mod:`arches_render.render.ray_stats`). Both
+        budgets run in one loop: inside Mitsuba's megakernel a loop ends per SIMD
+        packet, so a packet whose lanes are all done stops whatever the budget, and
+        a second loop would only emit the field's code twice.
 
         Parameters
         ----------
@@ -132,22 +181,22 @@ class SphereTracer:
             Ray origins, unit directions, far ends and lanes.
         cone : (mi.Float, mi.Float), optional
             ``(r0, s)``: each lane's cone (module docstring); None: full detail.
+        any_hit : bool
+            Unused here (every hit of the sphere tracer is certain); for the
+            interface of :class:`~.heightfield_caster.HeightfieldCaster`.
 
         Returns
         -------
-        (mi.Bool, mi.Float)
-            Hit mask and distance.
+        TraceResult
         """
         t_in, t_out = ray_box(o, d, self.lo_op, self.hi_op)
         t_start = dr.maximum(t_in, 0.0)
         t_end = dr.minimum(t_out, tmax)
         active = mi.Bool(active) & (t_start <= t_end)
-        omega0 = mi.Float(self.omega)
+        budget = self.max_steps * (1 + SECOND_PASS_FACTOR)
+        o, d = mi.Point3f(o), mi.Vector3f(d)
 
-        def cond(t, t_prev, r_prev, step, omega, hit, alive, i, o, d, t_end):
-            return alive
-
-        def body(t, t_prev, r_prev, step, omega, hit, alive, i, o, d, t_end):
+        def body(t, t_prev, r_prev, step, omega, hit, alive, i):
             f, (r,) = self.field.eval_bounds(o + d * t, (0.0,), d, self.footprint(cone, t))
             failed = (omega > 1.0) & (r + r_prev < step)
             # Relaxed step overshot: return to the last safe point, stop relaxing.
@@ -160,22 +209,31 @@ class SphereTracer:
             step = dr.select(failed, r_prev, t_next - t)
             t_prev = dr.select(failed, t_prev, t)
             r_prev = dr.select(failed, r_prev, r)
-            omega = dr.select(failed, 1.0, omega)
+            # Over-relaxation resumes after a safe step: a failed step costs one
+            # plain step, not the relaxation of the rest of the ray.
+            omega = dr.select(failed, 1.0, omega0)
             # On failure the next evaluation is at t_safe; step = r_prev makes the
             # overlap test there trivially satisfied.
             done = ~failed & (t >= t_end)  # [t_start, t_end] verified free
-            alive = alive & ~new_hit & ~done & (i + 1 < self.max_steps)
+            alive = alive & ~new_hit & ~done & (i + 1 < budget)
             t = dr.select(new_hit, t, t_next)
-            return t, t_prev, r_prev, step, omega, hit, alive, i + 1, o, d, t_end
+            return t, t_prev, r_prev, step, omega, hit, alive, i + 1
 
-        state = (mi.Float(t_start), mi.Float(t_start), mi.Float(0.0), mi.Float(0.0), omega0,
-                 mi.Bool(False), active, mi.UInt32(0), mi.Point3f(o), mi.Vector3f(d), t_end)
-        t, _, _, _, _, hit, _, _, _, _, _ = dr.while_loop(state, cond, body, label="sphere_trace")
-        return hit & active, t
+        omega0 = mi.Float(self.omega)
+        state = (mi.Float(t_start), mi.Float(t_start), mi.Float(0.0), mi.Float(0.0), mi.Float(omega0),
+                 mi.Bool(False), mi.Bool(active), mi.UInt32(0))
+        t, _, _, _, _, hit, alive, steps = dr.while_loop(state, lambda *s: s[6], body, label="sphere_trace")
+        return TraceResult.of(hit, t, steps, alive, active, self.max_steps)
+
+    def trace(self, o, d, tmax, active, cone=None):
+        """``(hit, t)`` of :meth:`query` (unresolved rays count as hits)."""
+        r = self.query(o, d, tmax, active, cone)
+        return r.hit, r.t
 
     def occluded(self, o, d, tmax, active, cone=None):
-        """Whether the segments ``o + t d``, ``0 <= t <= tmax``, meet the surface."""
-        return self.trace(o, d, tmax, active, cone)[0]
+        """Whether the segments ``o + t d``, ``0 <= t <= tmax``, meet the surface
+        (unresolved rays count as occluded)."""
+        return self.query(o, d, tmax, active, cone, any_hit=True).hit
 
     def surface(self, p, t, d=None, cone=None):
         """Surface point and outward normal for hits ``p`` found at distance ``t``

@@ -7,7 +7,10 @@ A scene file is data, never code. Top-level tables:
                  ``rr_depth``, ``geometry = "field" | "mesh"``, ``voxel`` (mesh mode,
                  metres), ``exposure`` (preview stops), ``eps`` (relative hit
                  tolerance, default 2e-4: well below a pixel, since a tolerance
-                 near a pixel inflates every silhouette), ``omega``
+                 near a pixel inflates every silhouette), ``omega``, ``max_steps``
+                 (sphere-tracing steps of a ray's first pass, default 512; a ray
+                 that uses them up gets a second pass of ``16 max_steps``, see
+                 :mod:`arches_render.render.sphere_tracer`)
 ``[camera]``     ``origin``, ``target``, ``up`` (default +Z), ``fov`` (degrees, horizontal)
 ``[cameras.NAME]`` named cameras with the keys of ``[camera]`` (``SceneDescription.cameras``,
                  in file order after ``[camera]``, which is named ``"camera"``); a
@@ -93,6 +96,7 @@ class RenderSettings:
     exposure: float = 0.0
     eps: float = 2e-4
     omega: float = 1.6
+    max_steps: int = 512
 
 
 @dataclass
@@ -420,7 +424,8 @@ def parse_scene(data: dict, path) -> SceneDescription:
         voxel=r.number("voxel", 0.0, lo=0.0),
         exposure=r.number("exposure", 0.0, lo=-20, hi=20),
         eps=r.number("eps", 2e-4, lo=1e-7, hi=1e-2),
-        omega=r.number("omega", 1.6, lo=1.0, hi=1.95))
+        omega=r.number("omega", 1.6, lo=1.0, hi=1.95),
+        max_steps=r.integer("max_steps", 512, lo=16, hi=1 << 16))
     if settings.max_depth == 0:
         raise r.error("max_depth", "must be -1 (unbounded) or an integer in [1, 1024] (got 0)")
     r.finish()
