@@ -9,6 +9,22 @@
                       detail (full detail pays for every octave). Extra fields: the
                       times, and the load average.
 
+``render_landscape_field_vs_mesh``  (issue 21) every gallery scene and each in-repo
+                      real DEM (``real_nm_canyon_10m``, ``real_jacksboro_80m``,
+                      ``real_salish_sea_2435m``) amplified with the default preset,
+                      rendered from every named camera: field time (``implicit_path``)
+                      against stock ``path`` on the scene's marching-cubes mesh, same
+                      resolution and spp, warm kernels, polygonization not counted.
+                      Value: the median of the per-scene ratios (each scene's ratio
+                      is its summed field time over its summed mesh time); baseline:
+                      the goal, 1.5 (worst: 2.5). Extra fields: per-scene ratios,
+                      the worst, the field path's samples per second, the counts of
+                      exhausted and unresolved primary rays, the load. Size by
+                      ``ARCHES_BENCH_LANDSCAPE="WxH,SPP"`` (default ``160x90,8``) and
+                      ``ARCHES_BENCH_LANDSCAPE_SCENES`` (comma-separated names: a subset).
+                      The Salish Sea DEM is amplified with ``--max-cells 3000`` (at
+                      full size its sea erosion alone takes minutes).
+
 Timings taken while other processes load the machine are inflated: compare the
 ratios of one run, and read ``load`` beside them.
 """
@@ -18,6 +34,7 @@ from __future__ import annotations
 import os
 import statistics
 import time
+from pathlib import Path
 
 import drjit as dr
 import mitsuba as mi
@@ -77,6 +94,70 @@ def bench_lod_octaves_cost(repeat):
                 resolution="320x180", load=round(load, 2))
 
 
+#: Real DEMs of the landscape benchmark: file, cell size (m), extra amplify options.
+REAL_DEMS = {"real_nm_canyon_10m": ("real_nm_canyon_10m.npy", 10.0, []),
+             "real_jacksboro_80m": ("real_jacksboro_80m.npy", 80.0, []),
+             "real_salish_sea_2435m": ("real_salish_sea_2435m.npy", 2435.0, ["--max-cells", "3000"])}
+
+
+def _landscape_scenes(tmp):
+    """``{name: scene path}``: the gallery and the real DEMs amplified into ``tmp``."""
+    from arches_render.cli import main
+    from arches_render.timing import REPO
+    scenes = {p.stem: p for p in sorted((REPO / "scenes" / "gallery").glob("*.toml"))}
+    for name, (file, cell, extra) in REAL_DEMS.items():
+        out = Path(tmp) / f"{name}.toml"
+        code = main(["amplify", str(REPO / "scenes" / "data" / file), "-o", str(out), "--cell-size", str(cell),
+                     "--seed", "5", "-q", *extra])
+        if code != 0:
+            raise RuntimeError(f"amplify {file} exited {code}")
+        scenes[name] = out
+    wanted = os.environ.get("ARCHES_BENCH_LANDSCAPE_SCENES")
+    if wanted:
+        scenes = {k: v for k, v in scenes.items() if k in wanted.split(",")}
+    return scenes
+
+
+def bench_render_landscape_field_vs_mesh(repeat):
+    import tempfile
+
+    from arches_render.render.jobs import set_camera
+    from arches_render.render.renderer import build_scene, render_layers
+    from arches_render.scene import load_scene
+    from arches_render.timing import median_renders
+    size, spp = os.environ.get("ARCHES_BENCH_LANDSCAPE", "160x90,8").split(",")
+    w, h = (int(v) for v in size.split("x"))
+    spp = int(spp)
+    load0 = os.getloadavg()[0]
+    ratios, rates, exhausted, unresolved = {}, [], 0, 0
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, path in _landscape_scenes(tmp).items():
+            desc = load_scene(path)
+            field, mesh = build_scene(desc, "field", w, h), build_scene(desc, "mesh", w, h)
+            tf = tm = 0.0
+            for cam in desc.cameras.values():
+                for scene in (field, mesh):
+                    set_camera(scene, cam.origin, cam.target, cam.up, cam.fov)
+                a, b = median_renders([field, mesh], spp, repeat)
+                tf, tm = tf + a, tm + b
+                rates.append(w * h * spp / a)
+            # Exhausted and unresolved primary rays, from the AOVs of one render a camera.
+            counted = build_scene(desc, "field", w, h, aovs=True)
+            for cam in desc.cameras.values():
+                set_camera(counted, cam.origin, cam.target, cam.up, cam.fov)
+                _, layers = render_layers(counted, 1, seed=3)
+                exhausted += int(round(float(layers["exhausted"][0][..., 0].sum())))
+                unresolved += int(round(float(layers["unresolved"][0][..., 0].sum())))
+            ratios[name] = round(tf / tm, 3)
+    values = sorted(ratios.values())
+    return dict(value=statistics.median(values), unit="x", baseline=1.5, baseline_is="goal",
+                worst=max(values), worst_goal=2.5, per_scene=ratios,
+                field_samples_per_s=round(statistics.median(rates)), resolution=f"{w}x{h}", spp=spp,
+                primary_exhausted_1spp=exhausted, primary_unresolved_1spp=unresolved,
+                load=round(0.5 * (load0 + os.getloadavg()[0]), 2))
+
+
 BENCHMARKS = {
     "lod_octaves_cost": (bench_lod_octaves_cost, 5),
+    "render_landscape_field_vs_mesh": (bench_render_landscape_field_vs_mesh, 1),
 }

@@ -62,6 +62,31 @@ def g(r, R):
     return np.where(u2 < 1.0, np.power(np.clip(1.0 - u2, 0.0, 1.0), 3), 0.0)
 
 
+def falloff_slope_max(lo, hi):
+    """``max |g'(u)|`` over ``u`` in ``[lo, hi]`` (Dr.Jit), ``g(u) = (1 - u^2)^3`` on ``[0, 1]``.
+
+    ``|g'(u)| = 6 u (1 - u^2)^2`` rises on ``[0, 1/sqrt 5]`` and falls on ``[1/sqrt 5, 1]``
+    (0 at both ends and beyond 1), so its maximum over an interval is ``G_SLOPE``
+    where the interval holds ``1/sqrt 5``, else its value at the end nearer to it.
+
+    Parameters
+    ----------
+    lo, hi : mi.Float
+        Interval ends (``lo <= hi``; any values: clamped to ``[0, 1]``).
+
+    Returns
+    -------
+    mi.Float
+    """
+    peak = 1.0 / math.sqrt(5.0)
+    a = dr.clip(lo, 0.0, 1.0)
+    b = dr.clip(hi, 0.0, 1.0)
+    u = dr.select(b < peak, b, a)
+    w = 1.0 - u * u
+    edge = 6.0 * u * w * w
+    return dr.select((a <= peak) & (b >= peak), G_SLOPE, edge)
+
+
 def g_dr(u2):
     """``g`` as a function of ``u^2 = (r/R)^2`` in Dr.Jit (0 for ``u^2 >= 1``)."""
     w = dr.maximum(1.0 - u2, 0.0)

@@ -57,6 +57,16 @@ bounds apply to the shifted level. Below the surface (``c < 0``) ``s(v) <= S_SIG
 gives ``v >= -c / S_SIGMA`` instead. ``f_P >= -c`` is the box ``P`` grown by
 ``r_c = R sqrt(1 - ((1 - c/T)/2)^(1/3))``, whose distance is ``d(p, P) - r_c``.
 
+Local slopes (issue 21; ``eval_local``). In the ball ``B(p, rad)``, ``v`` stays in
+``[v(p) - rad L_h, v(p) + rad L_h]`` and ``|grad f_T| <= L_h max s'`` over that interval,
+``s'(x) = (1 - u)(1 + c u)``, ``u = |x| / R``, 0 beyond ``R`` (a concave quadratic in ``u``
+for ``c > 0``, decreasing for ``c <= 0``): the saturated sigmoid deep in the rock or
+high in the air has slope 0. Where ``rad`` is at most a DEM cell the ball's
+footprint lies in the 3x3 cells around ``p``'s, and ``L_h`` uses their largest
+bilinear slope (plus the elevation primitives' and the fBm's) instead of the DEM's
+steepest cell anywhere. ``|grad f_P| <= (2T/R) max |g'|`` over ``d(q, P) / R`` in
+``[(d - rad)/R, (d + rad)/R]``, and ``|grad f| <= max`` of the two.
+
 References
 ----------
 Paris, A., Galin, E., Peytavie, A., Guérin, E., Gain, J. (2019). Terrain
@@ -79,7 +89,7 @@ from arches_render.field.heightfield import height_grid
 from arches_render.field.node import box_distance, opaque_float
 from arches_render.field.noise import fbm, fbm_lipschitz, fbm_range
 
-from .falloff import G_SLOPE, g_dr, sigmoid_coefficients, sigmoid_dr, sigmoid_slope
+from .falloff import G_SLOPE, falloff_slope_max, g_dr, sigmoid_coefficients, sigmoid_dr, sigmoid_slope
 from .skeletal_set import SkeletalSet
 
 R0_FACTOR = math.sqrt(1.0 - 2.0 ** (-1.0 / 3.0))
@@ -168,12 +178,15 @@ class ImplicitHeightfield(Heightfield):
         self._x1, self._y1 = opaque_float(x1), opaque_float(y1)
         self.grid_slope = self.slope_bound
         self.slope_bound = self.grid_slope + extra_slope
+        self.extra_slope_np, self.cell_np = float(extra_slope), min(self.dx, self.dy)
+        self._near_slope = mi.Float(_near_cell_slopes(H, self.dx, self.dy).astype(np.float32).ravel())
         self.top_np = hmax
         self.prism_lo = np.array([x0 + R, y0 + R, base])
         self.prism_hi = np.array([x1 - R, y1 - R, hmax])
         self._plo = [opaque_float(v) for v in self.prism_lo]
         self._phi = [opaque_float(v) for v in self.prism_hi]
         self._R, self._T = opaque_float(R), opaque_float(T)
+        self._inv_R = opaque_float(1.0 / R)
         self._a, self._b = opaque_float(self.sig_a), opaque_float(self.sig_b)
         self._inv_k = opaque_float(1.0 / min(1.0, T / R))
         self._inv_S = opaque_float(1.0 / sigmoid_slope(R, T))
@@ -215,6 +228,32 @@ class ImplicitHeightfield(Heightfield):
         return dr.minimum(fT, self._prism(p)[0])
 
     def eval_bounds(self, p, levels, direction=None, footprint=None):
+        return self.eval_local(p, levels, direction, footprint)[:2]
+
+    def local_slopes(self, v, d_prism, k, radii):
+        """Bounds of ``|grad f|`` in the balls of radii ``radii`` around a point of DEM
+        cell ``k`` where ``v = h - z`` and ``d(p, P) = d_prism`` (module docstring,
+        "Local slopes")."""
+        S_near = dr.gather(mi.Float, self._near_slope, k) + self.extra_slope_np
+        c = 6.0 * self.T_np / self.R_np - 3.0
+        peak = (c - 1.0) / (2.0 * c) if c > 0.0 else 0.0  # of s'(u) = (1 - u)(1 + c u)
+        out = []
+        for rad in radii:
+            # The cell's 3x3 neighbourhood holds a ball of one cell edge.
+            S = S_near if rad <= self.cell_np else mi.Float(self.slope_bound)
+            Lh = dr.sqrt(1.0 + S * S) * (1.0 + 1e-6)
+            lo, hi = v - rad * Lh, v + rad * Lh
+            ua = dr.select((lo <= 0.0) & (hi >= 0.0), 0.0, dr.minimum(dr.abs(lo), dr.abs(hi))) * self._inv_R
+            ub = dr.maximum(dr.abs(lo), dr.abs(hi)) * self._inv_R
+            u = dr.clip(dr.clip(mi.Float(peak), ua, ub), 0.0, 1.0)
+            sig = dr.select(ua >= 1.0, 0.0, (1.0 - u) * (1.0 + c * u))
+            prism = (2.0 * self._T * self._inv_R) * falloff_slope_max((d_prism - rad) * self._inv_R,
+                                                                     (d_prism + rad) * self._inv_R)
+            out.append(dr.maximum(Lh * sig, prism))
+        return tuple(out)
+
+    def eval_local(self, p, levels, direction=None, footprint=None, radii=()):
+        """``(f, ds, slopes)``: :meth:`eval_bounds` and the :meth:`local_slopes` of ``radii``."""
         v = self.elevation(p.x, p.y) - p.z
         fP, dP = self._prism(p)
         f = dr.minimum(sigmoid_dr(v, self._R, self._a, self._b), fP)
@@ -242,7 +281,7 @@ class ImplicitHeightfield(Heightfield):
             rc = self._R * dr.sqrt(dr.maximum(1.0 - dr.cbrt(wc), 0.0))
             d = dr.maximum(dT, dr.maximum(dP - rc, 0.0))
             ds.append(dr.select(c >= self._T, 0.0, d))
-        return f, tuple(ds)
+        return f, tuple(ds), self.local_slopes(v, dP, k, radii)
 
     def bounds(self):
         r0 = R0_FACTOR * self.R_np
@@ -274,4 +313,20 @@ class ImplicitHeightfield(Heightfield):
         return c
 
     def nbytes(self):
-        return super().nbytes() + (self.bumps.nbytes() if self.bumps is not None else 0)
+        own = super().nbytes() + self.heights_np.size * 4  # + the near-cell slopes
+        return own + (self.bumps.nbytes() if self.bumps is not None else 0)
+
+
+def _near_cell_slopes(H, dx, dy):
+    """Per sample ``(j, i)``: a bound of the bilinear interpolant's slope over the 3x3
+    cells around cell ``(j, i)`` (the last row and column repeat the cells before
+    them, as the cell lookup clamps). A bilinear cell's slope is at most
+    ``hypot(max |h10 - h00|, |h11 - h01|) / dx, max(|h01 - h00|, |h11 - h10|) / dy)``."""
+    from scipy.ndimage import maximum_filter
+    sx = np.maximum(np.abs(H[:-1, 1:] - H[:-1, :-1]), np.abs(H[1:, 1:] - H[1:, :-1])) / dx
+    sy = np.maximum(np.abs(H[1:, :-1] - H[:-1, :-1]), np.abs(H[1:, 1:] - H[:-1, 1:])) / dy
+    cells = maximum_filter(np.hypot(sx, sy), size=3, mode="nearest")
+    out = np.zeros_like(H, dtype=np.float64)
+    out[:-1, :-1] = cells
+    out[-1, :-1], out[:, -1] = out[-2, :-1], out[:, -2]
+    return out * (1.0 + 1e-6)

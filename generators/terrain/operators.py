@@ -14,6 +14,12 @@ that shifted level holds; the largest of them (and Hart's, with the operands'
 local slope bounds where they have them: see :func:`local_lipschitz`) is used. A
 carving set has ``M = 0`` and the terrain keeps its own tight bounds.
 
+Local slopes (issue 21): Hart's bound uses the sum of the operands' slope bounds
+in a ball of radius ``rad`` around ``p`` (:func:`eval_local`), for three radii (one
+cell edge of the finest primitive set, 1/8 and 1/64 of it), so a ray near a steep
+cave wall takes the step of the small ball, ``min(rad, (-f - c) / S(rad))``, and a
+ray in open space that of the large one.
+
 That global shift is vacuous for sculpting that *adds* matter in the air: there a
 set must reach above the terrain's air value ``-T``, so ``M_j > T`` and
 ``{f_T >= -c - M_j}`` is all of space (the terrain's bound is 0 everywhere), and
@@ -92,6 +98,27 @@ def local_lipschitz(node: Node, p):
     return L, r
 
 
+def eval_local(node: Node, p, levels, direction=None, footprint=None, radii=()):
+    """``(f, ds, slopes)``: ``node.eval_bounds`` and, for each radius of ``radii``, a
+    bound of the slope of ``node``'s (footprint) field in the ball of that radius
+    around ``p``. Nodes that know local slopes define ``eval_local`` (one pass for
+    value, bounds and slopes); for the others the slope is their
+    :func:`local_lipschitz` where its ball holds the radius, else their global one."""
+    own = getattr(node, "eval_local", None)
+    if own is not None:
+        return own(p, levels, direction, footprint, radii)
+    f, ds = node.eval_bounds(p, levels, direction, footprint)
+    if not radii:
+        return f, ds, ()
+    L, r = local_lipschitz(node, p)
+    L_glob = node.lipschitz
+    if footprint is not None and node.lod_kappa:
+        grow = 1.0 + node.lod_kappa * footprint.rate
+        L, L_glob = L * grow, L_glob * grow
+    slopes = tuple(L if r is None else dr.select(r >= rad, L, L_glob) for rad in radii)
+    return f, ds, slopes
+
+
 def local_hart(f, levels, L, r, L_global):
     """Distance bounds ``max(min(r, (-f - c)/L), (-f - c)/L_global)`` for each level."""
     out = []
@@ -122,6 +149,12 @@ class Sum(Node):
         return v
 
     def eval_bounds(self, p, levels, direction=None, footprint=None):
+        return self.eval_local(p, levels, direction, footprint)[:2]
+
+    def eval_local(self, p, levels, direction=None, footprint=None, radii=()):
+        """``(f, ds, slopes)``: :meth:`eval_bounds` and, for each of ``radii``, the sum
+        of the operands' slope bounds in that ball (:func:`eval_local`)."""
+        asked = tuple(radii)
         kids = self.children
         sups = [value_max(c) for c in kids]
         # Caps (module docstring): f_j < v_j within rho_j = d_j(-v_j), v_j just above
@@ -149,13 +182,15 @@ class Sum(Node):
             plans.append(plan)
         for j in {j for plan in plans if plan for j in plan}:
             asks[j] = (asks[j] or []) + [-caps[j]]
-        f, answers = None, []
+        radii = (self.slope_radii if levels else ()) + asked
+        f, answers, slopes = None, [], None
         for child, ask in zip(kids, asks):
-            if ask is not None:  # (no levels: a culled child still skips far work)
-                fc, dc = child.eval_bounds(p, tuple(ask), direction, footprint)
+            if ask is not None or radii:  # (no levels: a culled child still skips far work)
+                fc, dc, sc = eval_local(child, p, tuple(ask or ()), direction, footprint, radii)
             else:
-                fc, dc = child.eval(p), ()
+                fc, dc, sc = child.eval(p), (), ()
             f = fc if f is None else f + fc
+            slopes = sc if slopes is None else tuple(a + b for a, b in zip(slopes, sc))
             answers.append(dc)
         ds = [None] * n
         for i, plan in enumerate(plans):
@@ -181,7 +216,25 @@ class Sum(Node):
             grow = 1.0 + self.lod_kappa * footprint.rate
             L, L_glob = L * grow, L_glob * grow
         hart = local_hart(f, levels, L, r, L_glob)
-        return f, tuple(h if d is None else dr.maximum(d, h) for d, h in zip(ds, hart))
+        own = len(radii) - len(asked)
+        for S, rad in zip((slopes or ())[:own], radii[:own]):
+            # Hart's bound in the ball of radius rad, where the slope is at most S.
+            hart = tuple(dr.maximum(h, dr.minimum(dr.maximum(-f - c, 0.0) * dr.rcp(dr.maximum(S, 1e-12)), rad))
+                         for h, c in zip(hart, levels))
+        out = tuple(h if d is None else dr.maximum(d, h) for d, h in zip(ds, hart))
+        return f, out, tuple((slopes or ())[own:])
+
+    @property
+    def slope_radii(self):
+        """Radii of the balls in which the operands bound their slopes (``eval_local``):
+        the smallest operand's ``local_radius`` and two shorter ones (a ray near a
+        steep wall needs a small ball, one in open space a large one); ``()`` when no
+        operand has local slopes."""
+        rs = [float(c.local_radius) for c in self.children if getattr(c, "local_radius", None)]
+        if not rs:
+            return ()
+        m = min(rs)
+        return (m, m / 8.0, m / 64.0)
 
     def bounds(self):
         boxes = [c.bounds() for c in self.children]

@@ -67,6 +67,28 @@ surface and its ``D_max`` envelope, where rays graze. The loop runs over *near* 
 least the empty-cell distance; outside the grid, the distance to the box of all
 supports; ``FAR`` above ``value_max``.
 
+Local slopes (issue 21; :meth:`SkeletalSet.eval_local`). The cell bounds above sum
+``|e| G_SLOPE L_i`` over every primitive near a cell, about ten times the true
+gradient at a cave wall, where a primitive's falloff is far from its steepest point.
+Within the ball ``B(p, rad)``, ``rad`` at most one cell edge, only the primitives of
+``p``'s near list act, and the star distance of each stays in
+``[x - rad L_i, x + rad L_i]``, ``x = min(d~(p), 1)``: ``d~`` is ``L_i``-Lipschitz where it is
+below 1, and a path from ``p`` into the support enters it at ``d~ = 1``. Hence
+
+    |grad F| <= sum_i |e_i| L_i max { |g'(u)| : u in [x_i - rad L_i, x_i + rad L_i] }
+
+in the ball (curves: their members' maximum; ``"max"`` sets: the maximum), where
+``|g'(u)| = 6 u (1 - u^2)^2`` rises to ``G_SLOPE`` at ``u = 1/sqrt 5`` and falls to 0 at 1
+(:func:`.falloff.falloff_slope_max`). Where the noise is skipped (``rho >= D_max``)
+``x = 1`` is exact too. A footprint multiplies ``L_i`` by ``1 + kappa s``.
+
+Cores (carving sets, every ``e_i <= 0``). Then ``F <= F_i`` for each ``i``, so
+``F >= u`` (``u < 0``) needs ``e_i g(d~_i) >= u``, i.e. ``d~_i >= x = sqrt(1 - (u/e_i)^(1/3))``
+(where ``|e_i| > |u|``), i.e. ``rho_i >= x D >= x D_min``; ``rho_i`` being 1-Lipschitz,
+the distance from ``p`` to ``{F >= u}`` is at least ``max_i (x D_min,i - rho_i(p))``. The
+sum asks a carving set for ``u = -(c + T)`` (the terrain is at most ``T``), and this
+lets rays cross the carved air of a cave or an undercut in long steps.
+
 Footprint level of detail (:mod:`arches_render.field.lod`): with a footprint the
 star noise keeps the octaves the cone resolves. Its range is at most the full one
 (``D_min``, ``D_max`` hold), the slope of the truncated noise is at most the full one
@@ -102,7 +124,7 @@ from arches_render.field.noise import fbm, fbm_lipschitz, fbm_range
 from arches_render.field.primitive_set import empty_distance, grid_lists
 from arches_render.scene.array_files import Spec, read_arrays
 
-from .falloff import G_SLOPE, g_dr
+from .falloff import G_SLOPE, falloff_slope_max, g_dr
 
 #: Array names of the ``.npz`` format (``a`` and ``radius`` required).
 NPZ_KEYS = ("a", "b", "radius", "energy", "core", "group")
@@ -228,17 +250,24 @@ class SkeletalSet(Node):
         start, count, index = grid_lists(lo_p, hi_p, self.grid_lo, cell, res)
         self.max_per_cell, self.list_len = int(count.max()), len(index)
         self._per_prim_lipschitz = self._prim_lipschitz()
+        # Slope of the star distance d~ per primitive (module docstring, "Local slopes").
+        span0 = self.noise["span"] if self.noise else 0.0
+        self._Dmin = mi.Float(np.ascontiguousarray(R * (1.0 - span0) * (1.0 - 1e-6), dtype=np.float32))
+        self._Ld = mi.Float(np.ascontiguousarray(self._distance_slopes(), dtype=np.float32)
+                            * np.float32(1.0 + 1e-6))
         self._cell_bounds(start, count, index)
         # Levels below the threshold ({F >= u}, u > 0) exist only with positive energies:
         # their distance bounds (module docstring) use the empty cells and, per
         # primitive, the region that holds {F_i >= u}, over lists of the support boxes
         # grown by one cell edge (a primitive left out is that far away).
+        # Near lists serve the local slope bounds of every set (eval_local) too.
+        near = grid_lists(lo_p - cell, hi_p + cell, self.grid_lo, cell, res)
+        self._near_lists = tuple(mi.UInt32(v) for v in near)
+        self.near_len = len(near[2])
         self._empty = self._near = None
         if self.value_max > 0:
             self._empty = mi.Float(empty_distance(lo_p, hi_p, self.grid_lo, cell, res).astype(np.float32))
-            near = grid_lists(lo_p - cell, hi_p + cell, self.grid_lo, cell, res)
-            self._near = tuple(mi.UInt32(v) for v in near)
-            self.near_len = len(near[2])
+            self._near = self._near_lists
             self._reach_R = mi.Float(np.ascontiguousarray(R * (1.0 + span), dtype=np.float32))
             if self.noise:
                 nz = self.noise
@@ -260,6 +289,8 @@ class SkeletalSet(Node):
         self._R, self._e, self._core = f32(R), f32(e), f32(c)
         self._group = mi.UInt32(grp.astype(np.uint32))
         self._glo = [opaque_float(v) for v in self.grid_lo]
+        self._glo_box = ([opaque_float(v) for v in self.grid_lo],
+                         [opaque_float(v) for v in self.grid_lo + cell * res])
         self._inv_cell = opaque_float(1.0 / cell)
         self._threshold = opaque_float(self.threshold_np)
         if self.noise:
@@ -275,6 +306,11 @@ class SkeletalSet(Node):
     # -- bounds of the math -----------------------------------------------------
     def _prim_lipschitz(self):
         """``|e_i| G_SLOPE L_i`` per primitive (module docstring)."""
+        return np.abs(self.energy_np) * G_SLOPE * self._distance_slopes()
+
+    def _distance_slopes(self):
+        """``L_i``: the slope bound of the star distance ``d~`` of each primitive
+        inside its support (module docstring)."""
         R, c = self.radius_np, self.core_np
         if not self.noise:
             L = 1.0 / R
@@ -285,7 +321,7 @@ class SkeletalSet(Node):
             dmin, dmax = R * (1.0 - span), R * (1.0 + span)
             segment = (np.linalg.norm(self.b_np - self.a_np, axis=1) > 0).astype(np.float64)
             L = 1.0 / dmin + R * nz["amplitude"] * slope_n * (segment * dmax + c + R) / dmin ** 2
-        return np.abs(self.energy_np) * G_SLOPE * L
+        return L
 
     def _cell_bounds(self, start, count, index):
         """Per-cell gradient bounds and value ranges (per group maxima), and their
@@ -352,8 +388,8 @@ class SkeletalSet(Node):
         return 3.0 + per * min(self.max_per_cell, 8)
 
     def nbytes(self):
-        per_cell = 16 + (12 if self._near is not None else 0)  # start, count, L, M, [empty, near]
-        near = (self.near_len + self.n) * 4 if self._near is not None else 0
+        per_cell = 24 + (4 if self._near is not None else 0)  # start, count, L, M, near, [empty]
+        near = self.near_len * 4 + self.n * 4 * (2 if self._near is not None else 1)
         return 64 + self.n * 12 * 4 + int(np.prod(self.res)) * per_cell + self.list_len * 4 + near
 
     # -- evaluation ---------------------------------------------------------------
@@ -431,10 +467,13 @@ class SkeletalSet(Node):
         """Combined field ``F(p)`` (before the threshold) as ``mi.Float``."""
         return self._accumulate(p, (self._start, self._count, self._index))[0]
 
-    def _accumulate(self, p, lists, us=(), footprint=None):
-        """``(F(p), ds)``: the field over the cell lists ``lists`` (CSR ``start, count,
-        index``) and, for each ``u`` of ``us``, the smallest :meth:`_level_bound` over
-        them (``FAR`` where none acts). Primitives listed but not touching ``p`` add
+    def _accumulate(self, p, lists, us=(), footprint=None, radii=()):
+        """``(F(p), ds, slopes)``: the field over the cell lists ``lists`` (CSR ``start,
+        count, index``); for each ``u`` of ``us``, the smallest :meth:`_level_bound` over
+        them (``FAR`` where none acts) or, for a carving set (no positive energy), the
+        largest :meth:`_core_bound`; for each radius of ``radii``, the local slope
+        bound of :meth:`_local_slope` summed over the listed primitives (one member
+        per curve: their maximum). Primitives listed but not touching ``p`` add
         exactly 0, so the near lists give the same ``F`` as the cell lists. With a
         ``footprint``, the footprint field (star noise truncated)."""
         level = self._lod.level(footprint) if self.noise else None
@@ -443,44 +482,83 @@ class SkeletalSet(Node):
         cell, inside = self._cell(p)
         start = dr.gather(mi.UInt32, start_a, cell)
         count = dr.select(inside, dr.gather(mi.UInt32, count_a, cell), 0)
+        n_u = len(us)
 
         def visit(k, ds):
+            """``(e, g, ds, slopes)`` of primitive ``k``."""
             e = dr.gather(mi.Float, self._e, k)
-            if not us:
-                return e, self._falloff(p, k, level=level), ds
+            if not us and not radii:
+                return e, self._falloff(p, k, level=level), ds, ()
             geometry = self._falloff(p, k, True, level)
             out = []
             for u, d in zip(us, ds):
+                if carving:
+                    out.append(dr.maximum(d, self._core_bound(k, e, geometry, u)))
+                    continue
                 acts, bound = self._level_bound(k, e, geometry, u, rate)
                 out.append(dr.select(acts, dr.minimum(d, bound), d))
-            return e, geometry[0], tuple(out)
+            slopes = tuple(self._local_slope(k, e, geometry, rad, rate) for rad in radii)
+            return e, geometry[0], tuple(out), slopes
 
-        far = tuple(mi.Float(FAR) for _ in us)
+        carving = self.value_max <= 0
+        far = tuple(mi.Float(0.0 if carving else FAR) for _ in us)
+        zeros = tuple(mi.Float(0.0) for _ in radii)
         if self.combine == "max" or not self.grouped:
-            def body(i, acc, *ds):
+            def body(i, acc, *rest):
                 k = dr.gather(mi.UInt32, index_a, start + i)
-                e, gk, ds = visit(k, ds)
+                e, gk, ds, sl = visit(k, rest[:n_u])
                 v = e * gk
-                return (i + 1, dr.maximum(acc, v) if self.combine == "max" else acc + v, *ds)
+                # Union (max): one primitive at a time sets the slope; sum: they add.
+                join = dr.maximum if self.combine == "max" else (lambda a, b: a + b)
+                sl = tuple(join(a, b) for a, b in zip(rest[n_u:], sl))
+                return (i + 1, dr.maximum(acc, v) if self.combine == "max" else acc + v, *ds, *sl)
 
-            _, acc, *ds = dr.while_loop((mi.UInt32(0), mi.Float(0.0), *far), lambda i, *_: i < count,
-                                        body, label="skeletal_set")
-            return acc, ds
+            _, acc, *rest = dr.while_loop((mi.UInt32(0), mi.Float(0.0), *far, *zeros), lambda i, *_: i < count,
+                                          body, label="skeletal_set")
+            return acc, rest[:n_u], rest[n_u:]
 
-        def body_g(i, acc, cur_g, best, cur_e, *ds):
+        def body_g(i, acc, cur_g, best, cur_e, *rest):
             k = dr.gather(mi.UInt32, index_a, start + i)
             grp = dr.gather(mi.UInt32, self._group, k)
-            e, gk, ds = visit(k, ds)
+            e, gk, ds, sl = visit(k, rest[:n_u])
             new = grp != cur_g
             acc = acc + dr.select(new, cur_e * best, 0.0)
             best = dr.select(new, gk, dr.maximum(best, gk))
             cur_e = dr.select(new, e, cur_e)
-            return (i + 1, acc, grp, best, cur_e, *ds)
+            # Slopes: a curve is the maximum of its members (module docstring).
+            n_r = len(radii)
+            tot, cur = rest[n_u:n_u + n_r], rest[n_u + n_r:]
+            tot = tuple(t + dr.select(new, c, 0.0) for t, c in zip(tot, cur))
+            cur = tuple(dr.select(new, x, dr.maximum(c, x)) for c, x in zip(cur, sl))
+            return (i + 1, acc, grp, best, cur_e, *ds, *tot, *cur)
 
-        _, acc, _, best, cur_e, *ds = dr.while_loop(
-            (mi.UInt32(0), mi.Float(0.0), mi.UInt32(0xFFFFFFFF), mi.Float(0.0), mi.Float(0.0), *far),
-            lambda i, *_: i < count, body_g, label="skeletal_curves")
-        return acc + cur_e * best, ds
+        _, acc, _, best, cur_e, *rest = dr.while_loop(
+            (mi.UInt32(0), mi.Float(0.0), mi.UInt32(0xFFFFFFFF), mi.Float(0.0), mi.Float(0.0), *far,
+             *zeros, *zeros), lambda i, *_: i < count, body_g, label="skeletal_curves")
+        n_r = len(radii)
+        tot, cur = rest[n_u:n_u + n_r], rest[n_u + n_r:]
+        return acc + cur_e * best, rest[:n_u], [t + c for t, c in zip(tot, cur)]
+
+    def _core_bound(self, k, e, geometry, u):
+        """Carving sets (every ``e <= 0``): a lower bound of the distance from ``p`` to
+        ``{F >= u}`` (``u < 0``) from primitive ``k`` alone (module docstring, "Cores"):
+        ``x D_min - rho`` with ``x = sqrt(1 - (u / e)^(1/3))``, 0 where ``|e| <= |u|``."""
+        _, rho, _, _ = geometry
+        x = dr.sqrt(dr.maximum(1.0 - dr.cbrt(dr.minimum(u * dr.rcp(dr.minimum(e, -1e-30)), 1.0)), 0.0))
+        return dr.maximum(x * dr.gather(mi.Float, self._Dmin, k) - rho, 0.0)
+
+    def _local_slope(self, k, e, geometry, radius, rate=None):
+        """Bound of ``|grad F_k|`` in the ball of radius ``radius`` around ``p``
+        (module docstring, "Local slopes"): ``|e| max |g'| L_k`` over the star
+        distances the ball can hold."""
+        _, rho, _, D = geometry
+        Ld = dr.gather(mi.Float, self._Ld, k)
+        if rate is not None:
+            Ld = Ld * (1.0 + self.lod_kappa * rate)
+        # d~ at p (D is exact where the noise was evaluated; D_max elsewhere, where
+        # rho >= D_max and the clamp to 1 makes it exact too).
+        x = dr.minimum(rho * dr.rcp(dr.maximum(D, 1e-30)), 1.0)
+        return dr.abs(e) * falloff_slope_max(x - radius * Ld, x + radius * Ld) * Ld
 
     def eval(self, p):
         return self.field(p) - self._threshold
@@ -494,15 +572,24 @@ class SkeletalSet(Node):
                 self._cell_edge)
 
     def eval_bounds(self, p, levels, direction=None, footprint=None):
+        return self.eval_local(p, levels, direction, footprint)[:2]
+
+    def eval_local(self, p, levels, direction=None, footprint=None, radii=()):
+        """``(f, ds, slopes)``: :meth:`eval_bounds` and, for each radius of ``radii``
+        (at most one cell edge, :attr:`local_radius`), a bound of ``|grad f|`` in the
+        ball of that radius around ``p`` (module docstring, "Local slopes"), from the
+        same loop over the primitives."""
         # Local Hart bound: min(r, (-f - c) / L_local) (the ball of radius r has slope
         # <= L_local). Levels below the threshold ({F >= u}, u > 0) add the geometric
         # bounds of the module docstring ("Distance bounds"), from the same loop that
         # evaluates F (over the near lists).
         if not self.noise:
             footprint = None
-        us = [self._threshold - c for c in levels] if self._near is not None else []
-        if us:
-            F, geo = self._accumulate(p, self._near, us, footprint)
+        carving = self.value_max <= 0
+        us = [self._threshold - c for c in levels] if self._near is not None or carving else []
+        slopes = ()
+        if us or radii:
+            F, geo, slopes = self._accumulate(p, self._near_lists, us, footprint, radii)
             f = F - self._threshold
         elif footprint is not None:
             f = self._accumulate(p, (self._start, self._count, self._index), (), footprint)[0] - self._threshold
@@ -513,12 +600,24 @@ class SkeletalSet(Node):
         if footprint is not None:
             grow = 1.0 + self.lod_kappa * footprint.rate
             L, L_glob = L * grow, L_glob * grow
+        if radii:
+            # Outside the grid no primitive is listed: 0 where the supports' box is
+            # out of reach, else the global bound.
+            _, inside = self._cell(p)
+            outside = box_distance(p, self._glo_box[0], self._glo_box[1])
+            slopes = [dr.select(inside, dr.minimum(s_, L_glob), dr.select(outside > rad, 0.0, L_glob))
+                      for s_, rad in zip(slopes, radii)]
         inv, inv_glob = dr.rcp(dr.maximum(L, 1e-12)), 1.0 / L_glob
         ds = []
         for c in levels:
             d = dr.minimum(dr.maximum(-f - c, 0.0) * inv, r)
             ds.append(dr.maximum(d, dr.maximum(-f - c, 0.0) * inv_glob))
-        if us:
+            for s_, rad in zip(slopes, radii):
+                ds[-1] = dr.maximum(ds[-1], dr.minimum(dr.maximum(-f - c, 0.0) * dr.rcp(dr.maximum(s_, 1e-12)), rad))
+        if us and carving:
+            # Cores (module docstring): where some primitive alone is below u.
+            ds = [dr.select(u > 0.0, FAR, dr.select(u < 0.0, dr.maximum(d, g), d)) for d, g, u in zip(ds, geo, us)]
+        elif us:
             cell, inside = self._cell(p)
             empty = dr.gather(mi.Float, self._empty, cell)
             outside = box_distance(p, self._support_lo, self._support_hi)
@@ -530,7 +629,12 @@ class SkeletalSet(Node):
         elif levels and self.value_max <= 0:
             # No positive energy: {F >= u} is empty for every u > 0.
             ds = [dr.select(self._threshold - c > 0.0, FAR, d) for d, c in zip(ds, levels)]
-        return f, tuple(ds)
+        return f, tuple(ds), tuple(slopes)
+
+    @property
+    def local_radius(self):
+        """The largest radius :meth:`eval_local` bounds slopes in: one cell edge."""
+        return self.cell
 
     def __repr__(self):
         return f"SkeletalSet(n={self.n}, combine={self.combine!r}, noise={bool(self.noise)})"

@@ -1,0 +1,173 @@
+"""Local slope and core bounds of carved terrain (issue 21, item 2), and grazing rays
+through carved cavities traced to the first sign change that dense sampling finds.
+
+The bounds under test: ``eval_local`` slopes of skeletal sets (per primitive, over
+the star distances a ball can hold), of the implicit heightfield (its sigmoid's
+slope over the ball's vertical distances, the DEM's slope over the cell's
+neighbourhood) and of their sum; and the *cores* of carving sets (no matter where
+one primitive alone carves below the level).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from helpers import variant
+
+variant()
+
+import drjit as dr  # noqa: E402
+import mitsuba as mi  # noqa: E402
+
+from arches_render.field import evaluate  # noqa: E402
+from arches_render.generators.terrain.falloff import energy_for_radius  # noqa: E402
+from arches_render.generators.terrain.implicit_heightfield import ImplicitHeightfield  # noqa: E402
+from arches_render.generators.terrain.operators import Sum, eval_local  # noqa: E402
+from arches_render.generators.terrain.skeletal_set import SkeletalSet  # noqa: E402
+from arches_render.render.sphere_tracer import SphereTracer  # noqa: E402
+
+
+def _terrain():
+    """A canyon: a steep-walled valley along y in a tilted plateau, with fBm detail."""
+    x = np.linspace(0.0, 120.0, 61)
+    X, Y = np.meshgrid(x, x)
+    H = 30.0 + 0.05 * Y - 25.0 / (1.0 + np.exp(-(np.abs(X - 60.0) - 12.0) / -2.0))
+    return ImplicitHeightfield(H, (0, 0, 120, 120), R=8.0,
+                               amplification=dict(amplitude=0.4, wavelength=6.0, octaves=3, seed=7))
+
+
+def _tunnels(terrain):
+    """Karst-like tunnels and undercuts below the surface: polylines of segments
+    (grouped curves) and points, negative energies as the presets make them."""
+    rng = np.random.default_rng(11)
+    a, b, R, group = [], [], [], []
+    for k in range(6):
+        start = rng.uniform([10, 10, 0], [110, 110, 0])
+        pts = start + np.cumsum(rng.normal(0, 6.0, (5, 3)) * [1, 1, 0.2], axis=0)
+        z = terrain.elevation_np(pts[:, 0], pts[:, 1]) - rng.uniform(1.5, 4.0, len(pts))
+        pts[:, 2] = z
+        for i in range(len(pts) - 1):
+            a.append(pts[i]), b.append(pts[i + 1]), R.append(4.0), group.append(k)
+    # Undercuts along the canyon walls: points at the foot of each wall.
+    for y in np.linspace(15, 105, 10):
+        for xw in (48.0, 72.0):
+            p = np.array([xw, y, terrain.elevation_np(np.array([xw]), np.array([y]))[0] - 1.0])
+            a.append(p), b.append(p), R.append(3.0), group.append(len(group) + 100)
+    a, b, R = np.array(a), np.array(b), np.array(R)
+    e = -energy_for_radius(0.7 * R, R, terrain.T_np)
+    e[:len(group) - 20] = e[0]  # one energy per curve
+    return SkeletalSet(a, b, R, e, group=np.array(group), noise=dict(amplitude=0.15, wavelength=2.0, seed=3))
+
+
+TERRAIN = _terrain()
+TUNNELS = _tunnels(TERRAIN)
+CARVED = Sum(TERRAIN, TUNNELS)
+LO, HI = np.array([5.0, 5.0, 0.0]), np.array([115.0, 115.0, 40.0])
+
+
+def _vec(a, cls=mi.Point3f):
+    return cls(*(mi.Float(np.ascontiguousarray(a[:, i], dtype=np.float32)) for i in range(3)))
+
+
+def _near_surface_points(node, n, seed):
+    """Points where the field is within a few metres of its surface (where bounds matter)."""
+    rng = np.random.default_rng(seed)
+    p = rng.uniform(LO, HI, (40 * n, 3))
+    f = evaluate(node, p)
+    keep = p[np.abs(f) < 3.0]
+    assert len(keep) >= n
+    return keep[:n]
+
+
+@pytest.mark.parametrize("name", ["terrain", "tunnels", "carved"])
+def test_local_slopes_hold_in_their_balls(name):
+    """For every radius, ``|f(q1) - f(q2)| <= S |q1 - q2|`` for pairs in the ball, and
+    the slopes are tighter than the global bound somewhere (else they buy nothing)."""
+    node = {"terrain": TERRAIN, "tunnels": TUNNELS, "carved": CARVED}[name]
+    radii = CARVED.slope_radii
+    p = _near_surface_points(CARVED, 1500, seed=3)
+    _, _, slopes = eval_local(node, _vec(p), (0.0,), None, None, radii)
+    dr.eval(slopes)
+    rng = np.random.default_rng(5)
+    for S, rad in zip(slopes, radii):
+        S = S.numpy().astype(np.float64)
+        k = 8
+        def in_ball():
+            d = rng.normal(size=(len(p), k, 3))
+            d /= np.linalg.norm(d, axis=2, keepdims=True)
+            return p[:, None] + d * (rad * rng.uniform(0, 1, (len(p), k, 1)) ** (1 / 3) * 0.999)
+        q1 = in_ball()
+        q2 = q1 + rng.normal(size=q1.shape) * 0.02 * rad
+        inside = np.linalg.norm(q2 - p[:, None], axis=2) < rad
+        f1 = evaluate(node, q1.reshape(-1, 3)).reshape(len(p), k)
+        f2 = evaluate(node, q2.reshape(-1, 3)).reshape(len(p), k)
+        ratio = np.abs(f1 - f2) / np.maximum(np.linalg.norm(q1 - q2, axis=2), 1e-9)
+        # float32 evaluation noise: 2e-5 m of field over the pair's distance.
+        excess = ratio - S[:, None] - 2e-5 / np.maximum(np.linalg.norm(q1 - q2, axis=2), 1e-9)
+        assert excess[inside].max() <= 1e-3 * S.max(), f"radius {rad:.3g}: slope exceeds its bound"
+    assert np.median(slopes[-1].numpy()) < 0.5 * node.lipschitz
+
+
+@pytest.mark.parametrize("level", [0.0, 2.0, 8.0])
+def test_carving_bounds_are_free(level):
+    """Distance bounds of the carving set at the levels the sum asks (its cores) and
+    of the carved terrain: no point within a declared free ball holds ``f >= -level``."""
+    rng = np.random.default_rng(int(level * 10) + 1)
+    for node, c in ((TUNNELS, level + TERRAIN.T_np), (CARVED, level)):
+        # Points outside the level set, within a few metres of it (the carving set:
+        # in its cores, where it carves below the asked level).
+        cand = np.random.default_rng(3).uniform(LO, HI, (400000, 3))
+        fc = evaluate(node, cand)
+        p = cand[(fc < -c - 0.3) & (fc > -c - 6.0)][:2000]
+        assert len(p) > 200
+        f, (d,) = node.eval_bounds(_vec(p), (c,))
+        dr.eval(f, d)
+        d = np.minimum(d.numpy().astype(np.float64), 1e3)
+        sel = d > 0
+        dirs = rng.normal(size=(sel.sum(), 12, 3))
+        dirs /= np.linalg.norm(dirs, axis=2, keepdims=True)
+        q = p[sel, None] + dirs * (d[sel, None, None] * rng.uniform(0, 1, (sel.sum(), 12, 1)) ** (1 / 3) * 0.999)
+        assert evaluate(node, q.reshape(-1, 3)).max() + c < 1e-4
+        assert sel.mean() > 0.3
+
+
+def test_grazing_rays_in_carved_terrain_hit_the_first_sign_change():
+    """Rays along the tunnels and the canyon walls, at grazing angles, from inside the
+    cavities and from the air: each hits where 1 cm sampling finds the field's first
+    positive value (within the tracer's tolerance band), or proves there is none;
+    no ray is left unresolved after the second step budget."""
+    rng = np.random.default_rng(17)
+    n = 600
+    # From points in the air or in the tunnels, nearly horizontal directions along
+    # the canyon (y) and across it, a few degrees up or down.
+    f0, o = np.zeros(0), np.zeros((0, 3))
+    while len(o) < n:
+        cand = rng.uniform(LO + [10, 10, 0], HI - [10, 10, 0], (4 * n, 3))
+        fc = evaluate(CARVED, cand)
+        o, f0 = np.vstack([o, cand[fc < -0.3]]), np.concatenate([f0, fc[fc < -0.3]])
+    o = o[:n]
+    az = rng.choice([np.pi / 2, 0.0, np.pi], n) + rng.normal(0, 0.25, n)
+    el = rng.uniform(-0.12, 0.05, n)
+    d = np.column_stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+    tracer = SphereTracer(CARVED, eps=2e-4, omega=1.6, max_steps=512)
+    res = tracer.query(_vec(o), _vec(d, mi.Vector3f), mi.Float(60.0), mi.Bool(True))
+    dr.eval(res.hit, res.t, res.exhausted, res.unresolved)
+    hit, t, exhausted = res.hit.numpy(), res.t.numpy(), res.exhausted.numpy()
+    ts = np.arange(0.0, 60.0, 0.01)
+    f = evaluate(CARVED, (o[None] + ts[:, None, None] * d[None]).reshape(-1, 3)).reshape(len(ts), n)
+    inside = f > 0
+    found = inside.any(axis=0)
+    t_ref = np.where(found, ts[np.argmax(inside, axis=0)], np.inf)
+    band = -f < 2e-4 * np.maximum(ts[:, None], 1e-3)
+    t_band = ts[np.argmax(band, axis=0)]
+    assert found.mean() > 0.3 and (~found).mean() > 0.05  # both kinds are tested
+    # Grazing rays may need the second budget (first-order bounds crawl along a wall
+    # they nearly touch), never more: none is left unresolved, few are exhausted.
+    assert not res.unresolved.numpy().any()
+    assert exhausted.mean() < 0.05, f"{exhausted.sum()} rays needed the second budget"
+    assert hit[found].all(), f"{(~hit[found]).sum()} of {found.sum()} rays missed rock"
+    assert np.all(t[found] <= t_ref[found] + 0.02)
+    assert np.all(t[hit] >= t_band[hit] - 0.02), "a ray stopped before the tolerance band"
+    # A reported hit without a sampled crossing must be a tangency inside the band.
+    assert np.all(band.any(axis=0)[hit & ~found])
