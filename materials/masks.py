@@ -297,9 +297,11 @@ class Look:
             return i + 1, crease, wsum, t, hit
 
         zero = dr.zeros(mi.Float, dr.width(p.x))
+        # Inactive lanes leave at once: packets without an active lane skip the march.
+        active = mi.Bool(active)
         _, crease, wsum, t, hit = dr.while_loop(
-            (mi.UInt32(0), zero, zero, zero, dr.zeros(mi.Bool, dr.width(p.x))), lambda i, *_: i < 3 * K, body,
-            label="triplanar_cavity")
+            (mi.UInt32(0), zero, zero, zero, dr.zeros(mi.Bool, dr.width(p.x))),
+            lambda i, *_: (i < 3 * K) & active, body, label="triplanar_cavity")
         crease = crease * dr.rcp(dr.maximum(wsum, 1e-6))
         # Rock far overhead occludes less than rock just above (0.6 at the reach).
         ceiling = dr.select(hit, 1.0 - 0.4 * dr.clip(t * dr.rcp(reach), 0.0, 1.0), 0.0)

@@ -60,9 +60,10 @@ from ..backend import variant_class
 from . import masks as M
 from .detail import DETAIL_KEYS, Detail, footprint
 from .textures import TEXTURE_DIR, TILINGS, load_texture, texture_path
+from .weights import band, composite_weights, smoothstep01, triplanar_weights
 
-__all__ = ["MAX_LAYERS", "TEXTURE_DIR", "STRUCTURAL", "Layer", "triplanar_dict", "triplanar_weights",
-           "composite_weights", "texture_path", "register", "TriplanarBSDF"]
+__all__ = ["MAX_LAYERS", "TEXTURE_DIR", "STRUCTURAL", "Layer", "triplanar_dict", "texture_path", "register",
+           "TriplanarBSDF"]
 
 MAX_LAYERS = 8
 OBJP_ATTRIBUTE = "vertex_objp"
@@ -72,8 +73,6 @@ STRUCTURAL = ("layer_count", "detail_octaves", "strata_count", "strata_layer", "
 # Stand-in for an unbounded rule: finite so that ``bound - x`` never meets
 # ``inf - inf`` in the coverage ramps, yet far beyond any terrain.
 _UNBOUNDED = 1e30
-# Below this a soft width means a hard step; also keeps the ramps free of 0/0.
-_MIN_SOFT = 1e-6
 # Projections weaker than this skip their texture fetch (error < 0.01 %).
 _MIN_PROJECTION = 1e-4
 
@@ -203,66 +202,6 @@ def triplanar_dict(layers, sharpness: float = 8.0, space: str = "world", **extra
             value = getattr(layer, f.name)
             d[f"layer{i}_{f.name}"] = list(value) if f.name == "tint" else value
     return d
-
-
-def triplanar_weights(n, sharpness):
-    """Projection blend weights of the three axis projections.
-
-    Parameters
-    ----------
-    n : mi.Vector3f
-        Unit shading normal.
-    sharpness : mi.Float or float
-        Blend exponent ``s >= 1``.
-
-    Returns
-    -------
-    mi.Vector3f
-        ``(b_x, b_y, b_z)`` with ``b_k = |n_k|^s / sum_j |n_j|^s``.
-
-    References
-    ----------
-    Peytavie et al. (2009), section 6, "Texturing terrains of arbitrary geometry".
-    """
-    a = dr.abs(mi.Vector3f(n))
-    # Dividing by the largest component first keeps a^s away from underflow
-    # for large exponents (the largest term becomes exactly 1).
-    a = a / dr.maximum(dr.max(a), 1e-20)
-    a = dr.power(a, sharpness)
-    return a / (a.x + a.y + a.z)
-
-
-def composite_weights(coverages):
-    """Paint-style compositing weights of stacked layers.
-
-    Parameters
-    ----------
-    coverages : list of mi.Float
-        Coverage ``c_i`` of each layer, bottom first; ``c_0`` is taken as 1.
-
-    Returns
-    -------
-    list of mi.Float
-        ``w_i = c_i prod_{j>i} (1 - c_j)``; they sum to 1.
-    """
-    weights = [None] * len(coverages)
-    uncovered = mi.Float(1.0)
-    for i in range(len(coverages) - 1, 0, -1):
-        weights[i] = coverages[i] * uncovered
-        uncovered = uncovered * (1.0 - coverages[i])
-    weights[0] = uncovered
-    return weights
-
-
-def _smoothstep01(t):
-    t = dr.clip(t, 0.0, 1.0)
-    return t * t * (3.0 - 2.0 * t)
-
-
-def _band(x, lo, hi, soft):
-    """1 on ``[lo, hi]``, smoothstep fall-off to 0 over ``soft`` outside."""
-    inv = dr.rcp(dr.maximum(soft, _MIN_SOFT))
-    return _smoothstep01((x - lo) * inv + 1.0) * _smoothstep01((hi - x) * inv + 1.0)
 
 
 def _finite(x: float) -> float:
@@ -432,14 +371,15 @@ class _TriplanarImpl:
         -------
         mi.Color3f
         """
-        return self._shade(si, active)[0]
+        return self.shade(si, active)[0]
 
     # ------------------------------------------------------------ internals
-    def _terrain_terms(self, si, active):
-        """Occlusion and wetness at ``si`` (zeros where the material has neither)."""
+    def _terrain_terms(self, si, active, cavity=True):
+        """Occlusion and wetness at ``si`` (zeros where the material has neither);
+        the occlusion only on the lanes ``cavity`` (0 elsewhere)."""
         if not (self.look.cavity or self.look.wetness):
             return mi.Float(0.0), mi.Float(0.0)
-        occ = self.look.occlusion(mi.Point3f(si.p), mi.Vector3f(si.sh_frame.n), active)
+        occ = self.look.occlusion(mi.Point3f(si.p), mi.Vector3f(si.sh_frame.n), mi.Bool(active) & cavity)
         return occ, self.look.wet(si.p, occ)
 
     def _weights(self, si, p, occ, wet):
@@ -448,16 +388,16 @@ class _TriplanarImpl:
         cov = [None]
         P = self.params
         for i in range(1, self.layer_count):
-            c = P["coverage"][i] * _band(p.z, P["height_min"][i], P["height_max"][i],
+            c = P["coverage"][i] * band(p.z, P["height_min"][i], P["height_max"][i],
                                          P["height_soft"][i]) \
-                * _band(slope, P["slope_min"][i], P["slope_max"][i], P["slope_soft"][i])
+                * band(slope, P["slope_min"][i], P["slope_max"][i], P["slope_soft"][i])
             if self.masks[i] is not None:
                 node, lo, hi, kind = self.masks[i]
                 span = hi - lo
                 m = {"cavity": occ, "wetness": wet}.get(kind)
                 m = mi.Float(node.eval(mi.Point3f(p))) if m is None else m
                 t = (m - lo) / dr.select(span == 0.0, 1e-20, span)
-                c = c * _smoothstep01(t)
+                c = c * smoothstep01(t)
             cov.append(dr.clip(c, 0.0, 1.0))
         return composite_weights(cov)
 
@@ -475,11 +415,15 @@ class _TriplanarImpl:
             out += dr.select(on, b[k], 0.0) * c
         return out
 
-    def _shade(self, si, active):
-        """Albedo, the two Oren-Nayar colour terms ``sum w a A``, ``sum w a B``, and the bumped local normal."""
+    def shade(self, si, active=True, cavity=True):
+        """The shading of ``si``, computed once and shared by :meth:`sample` and
+        :meth:`eval_pdf` (their ``shading`` argument): albedo, the two Oren-Nayar
+        colour terms ``sum w a A``, ``sum w a B``, and the bumped local normal.
+        ``cavity``: lanes that compute the cavity term (a march of field
+        evaluations; the integrator asks for it at the camera ray's hit only)."""
         active = mi.Bool(active)
         p = self.position(si, active)
-        occ, wet = self._terrain_terms(si, active)
+        occ, wet = self._terrain_terms(si, active, cavity)
         w = self._weights(si, p, occ, wet)
         n = mi.Vector3f(si.sh_frame.n)
         b = triplanar_weights(n, self.sharpness)
@@ -514,7 +458,7 @@ class _TriplanarImpl:
         normal), the validity mask and the bumped local normal."""
         cos_gi, cos_go = mi.Frame3f.cos_theta(si.wi), mi.Frame3f.cos_theta(wo)
         valid = mi.Bool(active) & (cos_gi > 0.0) & (cos_go > 0.0)
-        _, ca, cb, nl = self._shade(si, valid) if shading is None else shading
+        _, ca, cb, nl = self.shade(si, valid) if shading is None else shading
         cos_i, cos_o = dr.dot(si.wi, nl), dr.dot(wo, nl)
         valid &= (cos_i > 0.0) & (cos_o > 0.0)
         # sin(a) tan(b) max(0, cos(dphi)) written without trigonometry:
@@ -524,13 +468,15 @@ class _TriplanarImpl:
         return dr.select(valid, ca + cb * g, 0.0), valid, dr.maximum(cos_o, 0.0)
 
     # ---------------------------------------------------------- BSDF interface
-    def sample(self, ctx, si, sample1, sample2, active=True):
-        """Cosine sample about the bumped normal; the weight is ``eval / pdf``."""
+    def sample(self, ctx, si, sample1, sample2, active=True, shading=None):
+        """Cosine sample about the bumped normal; the weight is ``eval / pdf``
+        (``shading``: :meth:`shade` of ``si``, if the caller has it)."""
         bs = dr.zeros(mi.BSDFSample3f)
         if not ctx.is_enabled(mi.BSDFFlags.DiffuseReflection):
             return bs, mi.Color3f(0.0)
         active = mi.Bool(active)
-        shading = self._shade(si, active & (mi.Frame3f.cos_theta(si.wi) > 0.0))
+        if shading is None:
+            shading = self.shade(si, active & (mi.Frame3f.cos_theta(si.wi) > 0.0))
         wo = mi.Frame3f(shading[3]).to_world(mi.warp.square_to_cosine_hemisphere(sample2))
         weight, valid, cos_o = self._brdf_cos(si, wo, active, shading)
         bs.wo = wo
@@ -554,11 +500,11 @@ class _TriplanarImpl:
         _, valid, cos_o = self._brdf_cos(si, wo, active)
         return dr.select(valid, cos_o * dr.inv_pi, 0.0)
 
-    def eval_pdf(self, ctx, si, wo, active=True):
-        """``(eval, pdf)`` sharing one shading evaluation."""
+    def eval_pdf(self, ctx, si, wo, active=True, shading=None):
+        """``(eval, pdf)`` sharing one shading evaluation (``shading``: as for :meth:`sample`)."""
         if not ctx.is_enabled(mi.BSDFFlags.DiffuseReflection):
             return mi.Color3f(0.0), mi.Float(0.0)
-        value, valid, cos_o = self._brdf_cos(si, wo, active)
+        value, valid, cos_o = self._brdf_cos(si, wo, active, shading)
         return value * dr.inv_pi * cos_o, dr.select(valid, cos_o * dr.inv_pi, 0.0)
 
     def eval_diffuse_reflectance(self, si, active=True):

@@ -14,7 +14,7 @@ try:
     backend.set_variant()
 except ImportError:  # the lead's integrator is not importable yet
     pass
-from arches_render.materials import presets, triplanar as tp  # noqa: E402
+from arches_render.materials import presets, triplanar as tp, weights as tw  # noqa: E402
 
 tp.register()
 
@@ -63,17 +63,17 @@ def test_projection_weights_sum_to_one_and_favour_dominant_axis():
     rng = np.random.default_rng(1)
     n = rng.normal(size=(1000, 3))
     n /= np.linalg.norm(n, axis=1, keepdims=True)
-    b = _np(tp.triplanar_weights(mi.Vector3f(n.T.astype(np.float32)), 8.0)).T
+    b = _np(tw.triplanar_weights(mi.Vector3f(n.T.astype(np.float32)), 8.0)).T
     assert np.allclose(b.sum(1), 1.0, atol=1e-5)
     assert (b.argmax(1) == np.abs(n).argmax(1)).all()
     expected = np.abs(n) ** 8 / (np.abs(n) ** 8).sum(1, keepdims=True)
     assert np.allclose(b, expected, atol=1e-5)
-    assert np.allclose(_np(tp.triplanar_weights(mi.Vector3f(0, 0, -1), 8.0)).ravel(), [0, 0, 1])
+    assert np.allclose(_np(tw.triplanar_weights(mi.Vector3f(0, 0, -1), 8.0)).ravel(), [0, 0, 1])
 
 
 def test_composite_weights_follow_paint_formula():
     c = [0.0, 0.3, 0.6, 0.25]
-    w = [float(x[0]) for x in tp.composite_weights([mi.Float(x) for x in c])]
+    w = [float(x[0]) for x in tw.composite_weights([mi.Float(x) for x in c])]
     c[0] = 1.0
     expected = [c[i] * np.prod([1 - c[j] for j in range(i + 1, 4)]) for i in range(4)]
     assert np.allclose(w, expected, atol=1e-6) and abs(sum(w) - 1) < 1e-6

@@ -101,7 +101,7 @@ def aov_channel_names(field_bsdf=None, atmosphere: bool = False, field: bool = F
     return out
 
 
-def primary_aovs(si, field_hit, valid, bsdf, field_bsdf=None, depth=None, steps=None) -> list:
+def primary_aovs(si, field_hit, valid, bsdf, field_bsdf=None, depth=None, steps=None, field_albedo=None) -> list:
     """AOV values of a primary hit, one ``mi.Float`` per channel of :func:`aov_channel_names`.
 
     Parameters
@@ -121,13 +121,20 @@ def primary_aovs(si, field_hit, valid, bsdf, field_bsdf=None, depth=None, steps=
         the ray origin, which a perspective camera puts on its near plane).
     steps : mi.Float, optional
         Steps the field tracer took on the ray (default 0).
+    field_albedo : mi.Color3f, optional
+        The albedo at field hits, where the caller has it (else the BSDF's).
 
     Returns
     -------
     list of mi.Float
     """
     zero = mi.Float(0.0)
-    albedo = dr.select(valid, mi.Color3f(bsdf.eval_diffuse_reflectance(si, valid)), mi.Color3f(0.0))
+    if field_albedo is None:
+        albedo = mi.Color3f(bsdf.eval_diffuse_reflectance(si, valid))
+    else:
+        rest = mi.Color3f(bsdf.eval_diffuse_reflectance(si, valid & ~field_hit))
+        albedo = dr.select(field_hit, mi.Color3f(field_albedo), rest)
+    albedo = dr.select(valid, albedo, mi.Color3f(0.0))
     n = dr.select(valid, si.sh_frame.n, mi.Vector3f(0.0))
     t = dr.select(valid, si.t if depth is None else depth, zero)
     p = dr.select(valid, si.p, mi.Point3f(0.0))

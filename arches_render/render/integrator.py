@@ -156,7 +156,11 @@ class _ImplicitPathImpl:
         tmax = dr.select(si.is_valid(), si.t, ray.maxt)
         res = self.tracer.query(ray.o, ray.d, tmax, active, cone)
         hit, t = res.hit, res.t
-        p, n = self.tracer.surface(ray.o + ray.d * t, t, ray.d, cone)
+        # Normals (four gradient taps and a value) only where the field was hit:
+        # packets without such a lane skip them.
+        p, n = dr.if_stmt((ray.o, ray.d, t, cone or ()), hit,
+                          lambda o, d, t, cone: self.tracer.surface(o + d * t, t, d, cone or None),
+                          lambda o, d, t, cone: (o + d * t, -d), label="field_surface")
         # Lift the point off the surface so that rays spawned here start in air: a
         # tenth of the hit tolerance, at least a few float32 ulps of the position (a
         # fixed fraction of the scene's size would be metres on a 1000 km tile).
@@ -225,9 +229,16 @@ class _ImplicitPathImpl:
                 tr, L_in = atm.segment(ray.o, ray.d, atm.segment_length(ray, si))
                 L = dr.select(active, L + beta * L_in, L)
                 beta = dr.select(active, beta * tr, beta)
+            # The field's material shaded once per vertex, for the AOVs, the light
+            # sample and the BSDF sample alike; its cavity term at the camera ray's hit.
+            shading = None
+            if self.shades_field:
+                needed = active & si.is_valid() & field_hit & (primary | (depth + 1 < self.max_depth))
+                shading = self.field_bsdf.shade(si, needed, cavity=primary)
             if aov:
                 steps = res.steps if res is not None else mi.UInt32(0)
-                aov = self.record_aovs(scene, ray, si, field_hit, steps, tr, active & primary, aov)
+                albedo = None if shading is None else shading[0]
+                aov = self.record_aovs(scene, ray, si, field_hit, steps, tr, active & primary, aov, albedo)
             if counts:
                 counts = count_rays(counts, 0, res, active & primary)
                 counts = count_rays(counts, 1, res, active & ~primary)
@@ -259,7 +270,7 @@ class _ImplicitPathImpl:
                 counts = count_rays(counts, 2, res, active_em)
             active_em &= ~blocked
             wo = si.to_local(ds.d)
-            bsdf_val, bsdf_pdf = bsdf.eval_pdf(bsdf_ctx, si, wo, active_em)
+            bsdf_val, bsdf_pdf = self.eval_pdf(bsdf, shading, field_hit, bsdf_ctx, si, wo, active_em)
             mis_em = dr.select(ds.delta, 1.0, mis_weight(ds.pdf, bsdf_pdf))
             if clear:
                 L_c = dr.select(active_em, L_c + beta_c * mis_em * bsdf_val * em_weight, L_c)
@@ -268,8 +279,8 @@ class _ImplicitPathImpl:
             L = dr.select(active_em, L + beta * mis_em * bsdf_val * em_weight, L)
 
             # BSDF sampling.
-            bs, bsdf_weight = bsdf.sample(bsdf_ctx, si, sampler.next_1d(), sampler.next_2d(),
-                                          active_next)
+            bs, bsdf_weight = self.sample_bsdf(bsdf, shading, field_hit, bsdf_ctx, si, sampler.next_1d(),
+                                               sampler.next_2d(), active_next)
             valid_ray |= active & si.is_valid()
             ray = si.spawn_ray(si.to_world(bs.wo))
             beta *= bsdf_weight
@@ -315,10 +326,32 @@ class _ImplicitPathImpl:
         counted = 2 * len(RAY_COUNT_KINDS) if self.tracer is not None else 0
         return len(self.aov_names()) - counted - (3 if self.atmosphere is not None else 0)
 
-    def record_aovs(self, scene, ray, si, field_hit, steps, tr, first, old):
+    @property
+    def shades_field(self):
+        """Whether the field's BSDF can shade a vertex once for all its queries (``shade``)."""
+        return self.tracer is not None and hasattr(self.field_bsdf, "shade")
+
+    def eval_pdf(self, bsdf, shading, field_hit, ctx, si, wo, active):
+        """``bsdf.eval_pdf``, with the field's vertices from their ``shading``."""
+        if shading is None:
+            return bsdf.eval_pdf(ctx, si, wo, active)
+        vf, pf = self.field_bsdf.eval_pdf(ctx, si, wo, active & field_hit, shading)
+        vm, pm = bsdf.eval_pdf(ctx, si, wo, active & ~field_hit)
+        return dr.select(field_hit, vf, vm), dr.select(field_hit, pf, pm)
+
+    def sample_bsdf(self, bsdf, shading, field_hit, ctx, si, sample1, sample2, active):
+        """``bsdf.sample``, with the field's vertices from their ``shading``."""
+        if shading is None:
+            return bsdf.sample(ctx, si, sample1, sample2, active)
+        bf, wf = self.field_bsdf.sample(ctx, si, sample1, sample2, active & field_hit, shading)
+        bm, wm = bsdf.sample(ctx, si, sample1, sample2, active & ~field_hit)
+        return dr.select(field_hit, bf, bm), dr.select(field_hit, wf, wm)
+
+    def record_aovs(self, scene, ray, si, field_hit, steps, tr, first, old, albedo=None):
         """The AOV values of the camera rays' hits (lanes ``first``), in the order of
         :meth:`aov_names`; ``old`` elsewhere. ``steps``: the field trace's steps;
-        ``tr``: the camera segment's transmittance (None without an atmosphere).
+        ``tr``: the camera segment's transmittance (None without an atmosphere);
+        ``albedo``: the field's albedo at its hits, from the vertex's shading.
 
         Recorded at the path's first vertex, so no second primary trace is
         needed; packets without a first-vertex lane skip the shading it takes."""
@@ -327,17 +360,19 @@ class _ImplicitPathImpl:
         # camera centre instead, at the unlifted hit point.
         centre = scene.sensors()[0].world_transform().translation()
         extra = () if tr is None else (tr,)
+        known = () if albedo is None else (albedo,)
 
-        def compute(si, field_hit, steps, first, *extra):
+        def compute(si, field_hit, steps, first, known, *extra):
             valid = first & si.is_valid()
             bsdf = self.bsdf_at(si, ray, field_hit)
             depth = dr.norm(ray.o + ray.d * si.t - centre)
-            out = primary_aovs(si, field_hit, valid, bsdf, field_bsdf, depth, mi.Float(steps))
+            out = primary_aovs(si, field_hit, valid, bsdf, field_bsdf, depth, mi.Float(steps),
+                               known[0] if known else None)
             if extra:
                 out += [extra[0].x, extra[0].y, extra[0].z]
             return tuple(dr.select(first, v, o) for v, o in zip(out, old))
 
-        return dr.if_stmt((si, field_hit, steps, first, *extra), first, compute,
+        return dr.if_stmt((si, field_hit, steps, first, known, *extra), first, compute,
                           lambda *args: tuple(mi.Float(o) for o in old), label="first_vertex_aovs")
 
     def aov_names(self):
