@@ -213,3 +213,33 @@ def test_bad_cell_size_exits_2_naming_the_option(tmp_path, capsys, value):
         main(["amplify", str(tmp_path / "d.npy"), "-o", str(tmp_path / "x.toml"), f"--cell-size={value}"])
     err = capsys.readouterr().err
     assert stop.value.code == 2 and "--cell-size must be D or DX,DY" in err and "Traceback" not in err
+
+
+# -- web elevation tiles ------------------------------------------------------------------------
+def _encode(H, encoding):
+    if encoding == "terrain-rgb":
+        v = np.round((H + 10000.0) * 10.0).astype(np.int64)
+        return np.stack([v // 65536, (v // 256) % 256, v % 256], axis=-1).astype(np.uint8)
+    v = H + 32768.0
+    r = np.floor(v / 256.0)
+    g = np.floor(v - 256.0 * r)
+    b = np.round((v - 256.0 * r - g) * 256.0)
+    return np.stack([r, g, np.minimum(b, 255)], axis=-1).astype(np.uint8)
+
+
+@pytest.mark.parametrize("encoding, tol", [("terrain-rgb", 0.051), ("terrarium", 1.0 / 256)])
+def test_web_elevation_tiles_decode_to_metres(tmp_path, capsys, encoding, tol):
+    import imageio.v3 as iio
+    from arches_render.field.heightmaps import read_dem
+    H = _relief(32, 32).astype(np.float64) - 450.0  # below and above sea level
+    iio.imwrite(tmp_path / "tile.png", _encode(H, encoding))
+    dem = read_dem(tmp_path / "tile.png", encoding=encoding)
+    assert not dem.normalised and np.abs(dem.heights - H).max() <= tol
+    # amplify needs the cell size of a tile, and reads it with it.
+    from robust_helpers import assert_one_line_error
+    rc, _, err = _amplify(capsys, tmp_path / "tile.png", "-o", tmp_path / "t.toml", "--encoding", encoding)
+    assert_one_line_error(rc, err, "tile.png", "--encoding", "--cell-size")
+    rc, stdout, err = _amplify(capsys, tmp_path / "tile.png", "-o", tmp_path / "t.toml", "--encoding", encoding,
+                               "--cell-size", 20, "--preset", "river")
+    assert rc == 0 and "heights 32x32 at 20 m" in stdout, err + stdout
+    assert float(np.load(tmp_path / "t.heights.npy").min()) == pytest.approx(float(H.min()), abs=0.06)

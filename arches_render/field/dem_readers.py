@@ -17,6 +17,12 @@ ESRI ASCII grid (``.asc``)
     (or ``dx, dy``), ``NODATA_value``, then the rows, north first. Cells are in the
     units of the grid's CRS, which an ``.asc`` does not name: metres are assumed,
     unless a ``.prj`` beside it holds a CRS pyproj reads.
+Web elevation tiles (``.png``, ``--encoding``)
+    RGB tiles with metres packed in the channels (:func:`decode_rgb`): Mapbox
+    Terrain-RGB ``h = -10000 + 0.1 (65536 R + 256 G + B)`` and Terrarium
+    ``h = 256 R + G + B / 256 - 32768``. A tile does not say where it is: the
+    cell size must be given (``156543.03 cos(lat) / 2^z`` m for a 256-pixel tile of
+    zoom ``z``).
 ``.npz``
     A ``heights`` array (or the archive's only 2-D array) and ``cell_size``: one
     number or ``[dx, dy]`` in metres.
@@ -54,13 +60,15 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["Georef", "LINEAR_UNITS", "geotiff_georef", "read_asc", "read_npz", "metres_per_pixel",
+__all__ = ["Georef", "LINEAR_UNITS", "ENCODINGS", "decode_rgb", "geotiff_georef", "read_asc", "read_npz", "metres_per_pixel",
            "square_cells", "parse_cell_size"]
 
 #: EPSG linear unit codes -> metres (GeoTIFF's ``VerticalUnitsGeoKey``, ``ProjLinearUnitsGeoKey``).
 LINEAR_UNITS = {9001: ("metres", 1.0), 9002: ("feet", 0.3048), 9003: ("US survey feet", 1200.0 / 3937.0),
                 9036: ("kilometres", 1000.0)}
 _USER_DEFINED = 32767
+#: RGB encodings of web elevation tiles.
+ENCODINGS = ("terrain-rgb", "terrarium")
 
 
 @dataclass
@@ -386,3 +394,38 @@ def parse_cell_size(text):
         raise ValueError(f"--cell-size must be D or DX,DY: metres between samples, each > 0 and <= 1e7 "
                          f"(got {text!r})")
     return vals[0], vals[-1]
+
+
+def decode_rgb(raw, encoding):
+    """Heights (m) of an RGB web elevation tile.
+
+    Parameters
+    ----------
+    raw : numpy.ndarray
+        ``(ny, nx, 3 or 4)`` 8-bit channels.
+    encoding : str
+        ``"terrain-rgb"`` (Mapbox) or ``"terrarium"`` (Mapzen / AWS Terrain Tiles).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(ny, nx)`` float64 metres.
+
+    Raises
+    ------
+    ValueError
+        Not an 8-bit RGB image, or an unknown encoding.
+
+    References
+    ----------
+    Mapbox Terrain-RGB v1 (docs.mapbox.com, "Mapbox Terrain-RGB v1"); Mapzen
+    Terrain Tiles, "Terrarium" format (github.com/tilezen/joerd, docs/formats.md).
+    """
+    if encoding not in ENCODINGS:
+        raise ValueError(f"--encoding {encoding!r}: allowed {', '.join(ENCODINGS)}")
+    if raw.ndim != 3 or raw.shape[-1] not in (3, 4) or raw.dtype != np.uint8:
+        raise ValueError(f"--encoding {encoding} needs an 8-bit RGB image (got {raw.dtype} {raw.shape})")
+    r, g, b = (raw[..., k].astype(np.float64) for k in range(3))
+    if encoding == "terrain-rgb":
+        return -10000.0 + 0.1 * (65536.0 * r + 256.0 * g + b)
+    return 256.0 * r + g + b / 256.0 - 32768.0

@@ -73,7 +73,7 @@ import tifffile
 from PIL import Image
 from scipy.ndimage import distance_transform_edt
 
-from .dem_readers import geotiff_georef, read_asc, read_npz
+from .dem_readers import decode_rgb, geotiff_georef, read_asc, read_npz
 from .node import evaluate
 from .noise import fbm_range
 from .warps import Noise
@@ -236,7 +236,7 @@ def _open_npy(path):
     return _Rows(path, offset, dtype, shape), False, None
 
 
-def _open_png(path):
+def _open_png(path, encoding=None):
     with Image.open(path) as im:
         w, h = im.size
     if w * h > DECODE_LIMIT:
@@ -248,6 +248,8 @@ def _open_png(path):
         raw = iio.imread(path)
     finally:
         Image.MAX_IMAGE_PIXELS = limit
+    if encoding:  # web elevation tiles: metres packed in the colour channels
+        return decode_rgb(raw, encoding), False, None, dict(notes=[f"{encoding} encoding decoded to metres"])
     if raw.ndim == 3:
         raw = raw[..., 0]
     if np.issubdtype(raw.dtype, np.integer):
@@ -295,7 +297,7 @@ _READERS = {".npy": _open_npy, ".png": _open_png, ".tif": _open_tiff, ".tiff": _
             ".npz": _open_npz}
 
 
-def read_dem(path, max_samples=DEFAULT_MAX_SAMPLES, nodata=None):
+def read_dem(path, max_samples=DEFAULT_MAX_SAMPLES, nodata=None, encoding=None):
     """Read a DEM, fill its no-data cells and reduce it to at most ``max_samples`` cells.
 
     Parameters
@@ -306,6 +308,9 @@ def read_dem(path, max_samples=DEFAULT_MAX_SAMPLES, nodata=None):
         Largest number of cells returned; larger DEMs are block-averaged.
     nodata : float, optional
         A value marking missing cells, besides NaN/inf and the GeoTIFF tag.
+    encoding : str, optional
+        ``"terrain-rgb"`` or ``"terrarium"``: an RGB ``.png`` web elevation tile
+        (:func:`.dem_readers.decode_rgb`).
 
     Returns
     -------
@@ -325,8 +330,10 @@ def read_dem(path, max_samples=DEFAULT_MAX_SAMPLES, nodata=None):
     if reader is None:
         raise DEMError(f"{path}: unknown DEM format {path.suffix!r} (use .npy, .npz, 16-bit .png, .tif, .tiff "
                        f"or .asc)")
+    if encoding and reader is not _open_png:
+        raise DEMError(f"{path}: --encoding {encoding} reads RGB .png web tiles only")
     try:
-        raw, normalised, tag_nodata, *meta = reader(path)
+        raw, normalised, tag_nodata, *meta = reader(path, encoding) if encoding else reader(path)
     except DEMError:
         raise
     except Exception as exc:  # a corrupt file: name it, no traceback

@@ -14,7 +14,8 @@ data is missing or half written; bad input exits 2 with one line and writes noth
 Options: ``--cell-size`` metres between samples, ``D`` or ``DX,DY`` (default: the file's
 georeference or ``cell_size``, else 1; non-square cells are resampled to square ones,
 printed and written in the header, with the CRS and the map position of the scene's
-origin), ``--height-scale``
+origin), ``--encoding`` (``terrain-rgb`` or ``terrarium``: an RGB ``.png`` web elevation tile,
+read in metres; needs ``--cell-size``), ``--height-scale``
 (multiplies the heights; PNG samples are read as [0, 1], so their default is a
 relief of a quarter of the tile's width), ``--preset`` (``auto``, the default,
 picks from the DEM: :func:`.preset_choice.choose_preset`; or sea, river, karst,
@@ -46,7 +47,7 @@ import numpy as np
 
 from arches_render.atomic import atomic_write, temp_dir
 from arches_render.commands import Progress, UsageError, bounded_int, positive_float, writable_output
-from arches_render.field.dem_readers import parse_cell_size, square_cells
+from arches_render.field.dem_readers import ENCODINGS, parse_cell_size, square_cells
 from arches_render.field.heightmaps import DEMError, read_dem
 
 from .amplify import PRESET_NAMES
@@ -93,6 +94,9 @@ def register(subparsers):
     p.add_argument("--cell-size", type=_cell_size, default=None,
                    help="metres between DEM samples: D or DX,DY (default: from the file's georeference or "
                         "cell_size, else 1); overrides the file")
+    p.add_argument("--encoding", choices=ENCODINGS, default=None,
+                   help="an RGB .png web elevation tile: terrain-rgb (Mapbox) or terrarium (Mapzen); "
+                        "needs --cell-size")
     p.add_argument("--height-scale", type=positive_float("--height-scale"), default=None,
                    help="multiply the heights (default 1; for PNG, a relief of 1/4 of the tile width)")
     p.add_argument("--preset", choices=PRESET_NAMES, default="auto",
@@ -153,8 +157,11 @@ def run(args) -> int:
     data_dir = Path(args.data_dir) if args.data_dir else Path(".")
     if data_dir.is_absolute() or ".." in data_dir.parts:
         raise UsageError(f"--data-dir {args.data_dir}: must be a folder inside the scene's folder")
+    if args.encoding and args.cell_size is None:
+        raise UsageError(f"{args.dem}: --encoding {args.encoding} needs --cell-size (a web tile does not say "
+                         f"where it is: 156543.03 cos(lat) / 2^zoom m for a 256-pixel tile)")
     try:
-        dem = read_dem(args.dem, max_samples=args.max_cells)
+        dem = read_dem(args.dem, max_samples=args.max_cells, encoding=args.encoding)
     except DEMError as exc:
         raise UsageError(f"{args.dem}: {exc}" if str(args.dem) not in str(exc) else str(exc)) from None
     H, cell, resampled = _checked_heights(args, dem)
