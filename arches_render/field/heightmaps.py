@@ -11,8 +11,11 @@ DEM formats and units
 ``.npy``          a 2-D numeric array, read through a memory map (large files are
                   never loaded whole); values are metres.
 ``.tif/.tiff``    GeoTIFF through tifffile (first page; memory-mapped when the file
-                  is uncompressed); values are metres. The GDAL no-data tag (42113)
-                  is honoured.
+                  is uncompressed). The GDAL no-data tag (42113) is honoured; the
+                  GeoKeys give the cell size in metres, the CRS and the map position
+                  and the vertical unit (:mod:`.dem_readers`).
+``.asc``          ESRI ASCII grid (header with cell size, corner and no-data value).
+``.npz``          ``heights`` and ``cell_size`` (metres: one number or ``dx, dy``).
 ``.png``          8- or 16-bit grey (an RGB image uses its first channel). Image
                   values carry no unit, so integer samples are normalised to
                   ``[0, 1]`` (``value / 65535`` for 16 bits); the caller scales them
@@ -33,6 +36,11 @@ so a 20,000 x 20,000 ``.npy`` is read with a few megabytes of memory. A compress
 GeoTIFF or a PNG must be decoded whole; beyond :data:`DECODE_LIMIT` samples they are
 refused with a clear error (convert them to ``.npy`` or an uncompressed GeoTIFF).
 A DEM must have at least 2 x 2 samples.
+
+Georeferenced DEMs (GeoTIFF with a geotransform, ``.asc``) store their rows north
+first; they are flipped so that row ``j`` is ``y = y0 + j dy`` with ``+y`` north, and
+their heights are converted to metres. :attr:`DEM.cell` and :attr:`DEM.georef` carry
+the cell sizes (after any reduction) and the map position.
 
 fBm heightmaps
 --------------
@@ -65,6 +73,7 @@ import tifffile
 from PIL import Image
 from scipy.ndimage import distance_transform_edt
 
+from .dem_readers import decode_rgb, geotiff_georef, read_asc, read_npz
 from .node import evaluate
 from .noise import fbm_range
 from .warps import Noise
@@ -102,6 +111,10 @@ class DEM:
         Number of no-data cells filled.
     notes : list of str
         What was done to the data, one sentence each (for the user).
+    cell : tuple of float or None
+        ``(dx, dy)`` metres per sample after the reduction, when the file says it.
+    georef : dem_readers.Georef or None
+        CRS and map position (GeoTIFF, ``.asc``).
     """
 
     heights: np.ndarray
@@ -111,6 +124,8 @@ class DEM:
     normalised: bool = False
     filled: int = 0
     notes: list = field(default_factory=list)
+    cell: tuple | None = None
+    georef: object = None
 
 
 def block_mean(array, step):
@@ -221,7 +236,7 @@ def _open_npy(path):
     return _Rows(path, offset, dtype, shape), False, None
 
 
-def _open_png(path):
+def _open_png(path, encoding=None):
     with Image.open(path) as im:
         w, h = im.size
     if w * h > DECODE_LIMIT:
@@ -233,6 +248,8 @@ def _open_png(path):
         raw = iio.imread(path)
     finally:
         Image.MAX_IMAGE_PIXELS = limit
+    if encoding:  # web elevation tiles: metres packed in the colour channels
+        return decode_rgb(raw, encoding), False, None, dict(notes=[f"{encoding} encoding decoded to metres"])
     if raw.ndim == 3:
         raw = raw[..., 0]
     if np.issubdtype(raw.dtype, np.integer):
@@ -251,6 +268,7 @@ def _open_tiff(path):
             except ValueError:
                 nodata = None
         shape = page.shape
+        georef, vfactor, gnotes = geotiff_georef(page, shape[:2])
         memmappable = page.is_memmappable and len(shape) == 2
         if memmappable:
             offset, dtype = page.dataoffsets[0], np.dtype(tf.byteorder + page.dtype.char)
@@ -262,13 +280,24 @@ def _open_tiff(path):
                        f"whole ({DECODE_LIMIT}); write it uncompressed or as .npy")
     else:
         a = tifffile.imread(path)
-    return a, False, nodata
+    return a, False, nodata, dict(georef=georef, vertical=vfactor, notes=gnotes)
 
 
-_READERS = {".npy": _open_npy, ".png": _open_png, ".tif": _open_tiff, ".tiff": _open_tiff}
+def _open_asc(path):
+    data, nodata, georef = read_asc(path)
+    return data, False, nodata, dict(georef=georef)
 
 
-def read_dem(path, max_samples=DEFAULT_MAX_SAMPLES, nodata=None):
+def _open_npz(path):
+    heights, cell = read_npz(path)
+    return heights, False, None, dict(cell=cell)
+
+
+_READERS = {".npy": _open_npy, ".png": _open_png, ".tif": _open_tiff, ".tiff": _open_tiff, ".asc": _open_asc,
+            ".npz": _open_npz}
+
+
+def read_dem(path, max_samples=DEFAULT_MAX_SAMPLES, nodata=None, encoding=None):
     """Read a DEM, fill its no-data cells and reduce it to at most ``max_samples`` cells.
 
     Parameters
@@ -279,6 +308,9 @@ def read_dem(path, max_samples=DEFAULT_MAX_SAMPLES, nodata=None):
         Largest number of cells returned; larger DEMs are block-averaged.
     nodata : float, optional
         A value marking missing cells, besides NaN/inf and the GeoTIFF tag.
+    encoding : str, optional
+        ``"terrain-rgb"`` or ``"terrarium"``: an RGB ``.png`` web elevation tile
+        (:func:`.dem_readers.decode_rgb`).
 
     Returns
     -------
@@ -296,9 +328,12 @@ def read_dem(path, max_samples=DEFAULT_MAX_SAMPLES, nodata=None):
         raise DEMError(f"no such file: {path}")
     reader = _READERS.get(path.suffix.lower())
     if reader is None:
-        raise DEMError(f"{path}: unknown DEM format {path.suffix!r} (use .npy, 16-bit .png, .tif or .tiff)")
+        raise DEMError(f"{path}: unknown DEM format {path.suffix!r} (use .npy, .npz, 16-bit .png, .tif, .tiff "
+                       f"or .asc)")
+    if encoding and reader is not _open_png:
+        raise DEMError(f"{path}: --encoding {encoding} reads RGB .png web tiles only")
     try:
-        raw, normalised, tag_nodata = reader(path)
+        raw, normalised, tag_nodata, *meta = reader(path, encoding) if encoding else reader(path)
     except DEMError:
         raise
     except Exception as exc:  # a corrupt file: name it, no traceback
@@ -343,9 +378,19 @@ def read_dem(path, max_samples=DEFAULT_MAX_SAMPLES, nodata=None):
     if filled:
         notes.append(f"filled {filled} no-data cells ({100.0 * filled / H.size:.2g}%) "
                      f"with the height of the nearest valid cell")
+    meta = meta[0] if meta else {}
+    georef, cell = meta.get("georef"), meta.get("cell")
+    notes += meta.get("notes", [])
+    if meta.get("vertical", 1.0) != 1.0:
+        H = H * meta["vertical"]
+    if georef is not None:
+        H = np.ascontiguousarray(H[::-1])  # rows north first in the file; +y is north in the scene
+        cell = georef.cell_m
+    if cell is not None:
+        cell = (cell[0] * step, cell[1] * step)
     if float(H.max() - H.min()) == 0.0:
         notes.append("the DEM is flat (all heights equal)")
-    return DEM(H, path, shape, step, normalised, filled, notes)
+    return DEM(H, path, shape, step, normalised, filled, notes, cell, georef)
 
 
 def fbm_heightmap(extent, resolution, amplitude=30.0, wavelength=80.0, octaves=6, lacunarity=2.0,

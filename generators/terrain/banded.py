@@ -81,7 +81,7 @@ from .implicit_heightfield import R0_FACTOR, ImplicitHeightfield
 from .operators import LocalWarp, Sum
 from .skeletal_set import SkeletalSet
 
-__all__ = ["BandStats", "sample_banded", "polygonize_banded", "polygonize_dense"]
+__all__ = ["BandStats", "sample_banded", "polygonize_banded", "polygonize_dense", "slab_mesh"]
 
 #: Terrain nodes whose field is a closed form of one elevation per column.
 TERRAINS = (ImplicitHeightfield, Heightfield)
@@ -537,3 +537,47 @@ def polygonize_dense(node: Node, voxel: float | None = None, normals: bool = Tru
         idx = np.concatenate([np.repeat(ii, len(jk))[:, None], np.tile(jk, (len(ii), 1))], axis=1)
         vol[i:i + len(ii)] = evaluate(node, grid.lo + idx * voxel).reshape(len(ii), ny, nz)
     return _mesh(node, vol, grid.lo, voxel, normals=normals)
+
+
+def slab_mesh(root: Node, extent, z0: float, z1: float, voxel: float, border: float):
+    """Mesh of ``root`` inside the slab ``z0 <= z <= z1`` and its faces off the tile's border.
+
+    Parameters
+    ----------
+    root : Node
+        The tree (an amplified terrain).
+    extent : sequence of 4 floats
+        ``(x0, y0, x1, y1)`` of the tile.
+    z0, z1 : float
+        The slab's floor and ceiling (m).
+    voxel : float
+        Grid spacing (m).
+    border : float
+        Faces closer than this to the tile's sides are not *inner*.
+
+    Returns
+    -------
+    (trimesh.Trimesh, numpy.ndarray) or None
+        The mesh and the boolean mask of its inner faces (away from the border and
+        from the slab's cut faces); ``None`` when the slab holds no surface at this
+        voxel (the terrain lies wholly above or below it, or the slab falls between
+        two rows of grid vertices): a caller that guides sampling with it keeps what
+        it has, rather than stopping on an error.
+
+    References
+    ----------
+    Paris et al. (2019), section 6.1: each sea-erosion step samples the mesh of the
+    terrain carved so far.
+    """
+    import trimesh
+    x0, y0, x1, y1 = extent
+    box = Box([(x0 + x1) / 2, (y0 + y1) / 2, (z0 + z1) / 2], [(x1 - x0) / 2, (y1 - y0) / 2, (z1 - z0) / 2])
+    try:
+        m = polygonize_banded(Intersection(root, box), voxel)
+    except ValueError:  # "no surface inside its bounds at this voxel size"
+        return None
+    mesh = trimesh.Trimesh(np.asarray(m.vertices, np.float64), np.asarray(m.faces, np.int64), process=False)
+    c = mesh.triangles_center
+    inner = ((c[:, 0] > x0 + border) & (c[:, 0] < x1 - border) & (c[:, 1] > y0 + border)
+             & (c[:, 1] < y1 - border) & (c[:, 2] > z0 + 0.5 * voxel) & (c[:, 2] < z1 - 0.5 * voxel))
+    return mesh, inner

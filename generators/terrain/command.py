@@ -1,7 +1,7 @@
 """``arches-render amplify DEM -o SCENE.toml``: a DEM amplified into a volumetric terrain scene.
 
-Reads a DEM (``.npy``, 16-bit ``.png``, GeoTIFF ``.tif``; see
-:mod:`arches_render.field.heightmaps`), builds the construction tree of a
+Reads a DEM (``.npy``, ``.npz``, 16-bit ``.png``, GeoTIFF ``.tif``, ESRI ``.asc``; see
+:mod:`arches_render.field.heightmaps` and :mod:`arches_render.field.dem_readers`), builds the construction tree of a
 preset (:mod:`.amplify`) and writes a scene that renders as it is: the
 ``[nodes.*]`` of the tree, the heights (``.npy``), the primitive arrays (``.npz``)
 and the water (``.ply``) beside it (or under ``--data-dir``), named cameras
@@ -11,7 +11,11 @@ sky, the far field to the horizon (:mod:`.far_field`) and the triplanar
 the scene file last, each written atomically, so a reader never sees a scene whose
 data is missing or half written; bad input exits 2 with one line and writes nothing.
 
-Options: ``--cell-size`` metres between samples (default 1), ``--height-scale``
+Options: ``--cell-size`` metres between samples, ``D`` or ``DX,DY`` (default: the file's
+georeference or ``cell_size``, else 1; non-square cells are resampled to square ones,
+printed and written in the header, with the CRS and the map position of the scene's
+origin), ``--encoding`` (``terrain-rgb`` or ``terrarium``: an RGB ``.png`` web elevation tile,
+read in metres; needs ``--cell-size``), ``--height-scale``
 (multiplies the heights; PNG samples are read as [0, 1], so their default is a
 relief of a quarter of the tile's width), ``--preset`` (``auto``, the default,
 picks from the DEM: :func:`.preset_choice.choose_preset`; or sea, river, karst,
@@ -21,6 +25,10 @@ otherwise), ``--seed``, ``--max-cells`` (larger DEMs are block-averaged down to 
 default 8192^2: the reduction is printed and written in the scene's header; at 8192^2
 the implicit heightfield alone holds 1.3 GB, heights and maximum mipmaps, 2.6 GB peak),
 ``--data-dir`` (relative to the scene's folder), ``-q``.
+
+A preset that finds nothing to carve (no coastal cliff, no tunnel, a flat DEM) says so
+in one line, printed and written in the scene's header, and with ``auto`` the next
+applicable preset runs instead (:mod:`.fallback`); the scene is written in any case.
 
 Limits (exit 2, one line naming the file): at least 3 samples a side, sides at
 most :data:`MAX_ASPECT` times longer than the other (the polygonizer's default
@@ -39,11 +47,13 @@ import numpy as np
 
 from arches_render.atomic import atomic_write, temp_dir
 from arches_render.commands import Progress, UsageError, bounded_int, positive_float, writable_output
+from arches_render.field.dem_readers import ENCODINGS, parse_cell_size, square_cells
 from arches_render.field.heightmaps import DEMError, read_dem
 
-from .amplify import PRESET_NAMES, amplify
+from .amplify import PRESET_NAMES
+from .fallback import amplify_soft
 from .presets import PRESETS
-from .scene_writer import scene_document, toml_text
+from .scene_writer import toml_text
 
 #: Default largest DEM processed (cells); larger ones are averaged down.
 MAX_CELLS = 8192 * 8192
@@ -66,6 +76,14 @@ def _finite_float(name):
     return parse
 
 
+def _cell_size(text):
+    import argparse
+    try:
+        return parse_cell_size(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def register(subparsers):
     p = subparsers.add_parser(
         "amplify", help="amplify a DEM (.npy, 16-bit .png, .tif) into a volumetric terrain scene",
@@ -73,8 +91,12 @@ def register(subparsers):
                     "write a scene file that renders as it is (Paris et al. 2019).")
     p.add_argument("dem", help="DEM file: .npy, 16-bit .png or GeoTIFF .tif")
     p.add_argument("-o", "--output", required=True, help="scene file to write (.toml)")
-    p.add_argument("--cell-size", type=positive_float("--cell-size"), default=1.0,
-                   help="metres between DEM samples (default 1)")
+    p.add_argument("--cell-size", type=_cell_size, default=None,
+                   help="metres between DEM samples: D or DX,DY (default: from the file's georeference or "
+                        "cell_size, else 1); overrides the file")
+    p.add_argument("--encoding", choices=ENCODINGS, default=None,
+                   help="an RGB .png web elevation tile: terrain-rgb (Mapbox) or terrarium (Mapzen); "
+                        "needs --cell-size")
     p.add_argument("--height-scale", type=positive_float("--height-scale"), default=None,
                    help="multiply the heights (default 1; for PNG, a relief of 1/4 of the tile width)")
     p.add_argument("--preset", choices=PRESET_NAMES, default="auto",
@@ -103,7 +125,18 @@ def _checked_heights(args, dem):
     if max(nx, ny) > MAX_ASPECT * (min(nx, ny) - 1) + 1:
         raise UsageError(f"{args.dem}: {nx}x{ny} samples; a side may be at most {MAX_ASPECT} times longer than "
                          f"the other (crop the DEM into tiles)")
-    cell = args.cell_size * dem.step
+    if args.cell_size is not None:  # the user's override: metres between the file's samples
+        dx, dy = (c * dem.step for c in args.cell_size)
+    else:
+        dx, dy = dem.cell if dem.cell is not None else (float(dem.step), float(dem.step))
+    notes = []
+    if abs(dx - dy) > 1e-9 * max(dx, dy):
+        # The implicit heightfield has square cells: resample (a geographic grid, DX,DY).
+        H, cell = square_cells(H, dx, dy, args.max_cells)
+        notes.append(f"resampled {nx}x{ny} cells of {dx:.4g} x {dy:.4g} m to {H.shape[1]}x{H.shape[0]} square "
+                     f"cells of {cell:.4g} m (bilinear)")
+    else:
+        cell = dx
     scale = args.height_scale
     if scale is None:
         scale = 0.25 * cell * (max(H.shape) - 1) if dem.normalised else 1.0
@@ -113,7 +146,7 @@ def _checked_heights(args, dem):
     if not math.isfinite(big) or big > MAX_HEIGHT or not np.all(np.isfinite(H.astype(np.float32))):
         raise UsageError(f"{args.dem}: heights reach {big:.3g} m after scaling by {scale:g}; "
                          f"amplify accepts heights within +-{MAX_HEIGHT:g} m")
-    return H, cell
+    return H, cell, notes
 
 
 def run(args) -> int:
@@ -124,43 +157,53 @@ def run(args) -> int:
     data_dir = Path(args.data_dir) if args.data_dir else Path(".")
     if data_dir.is_absolute() or ".." in data_dir.parts:
         raise UsageError(f"--data-dir {args.data_dir}: must be a folder inside the scene's folder")
+    if args.encoding and args.cell_size is None:
+        raise UsageError(f"{args.dem}: --encoding {args.encoding} needs --cell-size (a web tile does not say "
+                         f"where it is: 156543.03 cos(lat) / 2^zoom m for a 256-pixel tile)")
     try:
-        dem = read_dem(args.dem, max_samples=args.max_cells)
+        dem = read_dem(args.dem, max_samples=args.max_cells, encoding=args.encoding)
     except DEMError as exc:
         raise UsageError(f"{args.dem}: {exc}" if str(args.dem) not in str(exc) else str(exc)) from None
-    H, cell = _checked_heights(args, dem)
+    H, cell, resampled = _checked_heights(args, dem)
     # A reduction changes what the DEM resolves: say so in one line, with the way to keep more.
     notes = [f"{n}; the cell is now {cell:g} m (--max-cells {args.max_cells}; a larger value keeps more)"
-             if n.startswith("reduced") else n for n in dem.notes]
-    for note in notes:
+             if n.startswith("reduced") else n for n in dem.notes] + resampled
+    georef = dem.georef.lines() if dem.georef is not None else []
+    for note in notes + georef[:1]:
         print(f"arches-render amplify: {args.dem}: {note}", flush=True)
 
+    cell_text = (",".join(f"{c:g}" for c in dict.fromkeys(args.cell_size)) if args.cell_size
+                 else f"{cell:g} (from the file)" if dem.cell is not None else "1")
     bar = Progress(f"amplify {args.preset}", "step", args.quiet)
     prefix = (data_dir / out.stem).as_posix()
     # The work folder's name carries this process's id: one left by a kill is swept by the next run.
     with temp_dir(out.parent, out.stem) as work:
-        result = amplify(H, cell, args.preset, args.seed, work, prefix, sea_level=args.sea_level,
-                         precision=args.precision,
-                         progress=lambda done, total, label: (bar.bar.set_postfix_str(label), bar(done, total)))
-        bar.close()
-        print(f"arches-render amplify: preset {result.preset} ({result.reason})", flush=True)
         shots_bar = Progress("shots", "landform", args.quiet)
-        doc, lines = scene_document(result, out.stem, work, progress=shots_bar)
+        # A preset that finds nothing to carve says so and the next applicable one runs (.fallback).
+        kept = amplify_soft(H, cell, args.preset, args.seed, work, prefix, out.stem, sea_level=args.sea_level,
+                            precision=args.precision, shots_progress=shots_bar,
+                            progress=lambda done, total, label: (bar.bar.set_postfix_str(label),
+                                                                 bar(done, total)),
+                            say=lambda line: print(f"arches-render amplify: {args.dem}: {line}", flush=True))
+        bar.close()
         shots_bar.close()
+        result, doc, lines = kept.result, kept.doc, kept.lines
+        print(f"arches-render amplify: preset {result.preset} ({result.reason})", flush=True)
         # Publish the data files (atomic renames within one folder tree), then the scene.
         for rel in result.files:
             dest = out.parent / rel
             dest.parent.mkdir(parents=True, exist_ok=True)
-            os.replace(work / rel, dest)
+            os.replace(kept.folder / rel, dest)
         header = "\n".join([f"Generated by: arches-render amplify {Path(args.dem).name} --preset {args.preset} "
-                            f"--seed {args.seed} --cell-size {args.cell_size:g} --sea-level {args.sea_level:g}"]
-                           + [f"DEM: {note}" for note in notes] + lines)
+                            f"--seed {args.seed} --cell-size {cell_text} --sea-level {args.sea_level:g}"]
+                           + [f"DEM: {note}" for note in notes] + georef + kept.notes + lines)
         text = toml_text(doc, header)
         with atomic_write(out, "w", encoding="utf-8") as f:
             f.write(text)
     bar.close()
     st = result.stats
-    for note in ([st["note"]] if "note" in st else []) + st.get("notes", []):
+    # A flat DEM's note was said already as a "nothing to carve" line.
+    for note in ([st["note"]] if "note" in st and not kept.notes else []) + st.get("notes", []):
         print(f"arches-render amplify: {args.dem}: {note}", flush=True)
     print(f"arches-render amplify: wrote {out} ({st['nodes']} nodes, {st['primitives']} primitives, "
           f"{st['memory_bytes'] / 1e6:.2f} MB; heights {H.shape[1]}x{H.shape[0]} at {cell:g} m; "

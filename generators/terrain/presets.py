@@ -65,16 +65,14 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
-import trimesh
 from scipy.ndimage import distance_transform_edt, maximum_filter
 from scipy.spatial import cKDTree
 
-from arches_render import field as F
 from arches_render.scene.nodes import NodeBuilder
 
 from . import hoodoos as hd, karst as ks
 from .accessibility import heightfield_mesh
-from .banded import polygonize_banded
+from .banded import slab_mesh
 from .falloff import g
 from .geology import resistance
 from .river_erosion import river_erosion
@@ -86,6 +84,9 @@ __all__ = ["PRESETS", "Preset", "Amplification", "NodeTables", "StepTimer", "SEA
 
 _CAVITY_AT = 0.6  # cavity radius / falloff radius of a carving primitive
 SEA_STEPS = 3  # steps of sea erosion, as in the paper's Fig. 11
+#: Lowest coastal cliff (m) the sea preset carves: below, a cave would be under the
+#: smallest feature (1 m = 0.2 C) and the "cliff" is a beach or a dune.
+MIN_COAST_CLIFF = 5.0
 #: Most primitives one run makes (the paper's largest tree, Fig. 17, has 165,773).
 MAX_PRIMITIVES = 250_000
 
@@ -284,18 +285,6 @@ def _karst_sizes(run):
     return tunnel, spacing
 
 
-def _band_mesh(root, extent, z0, z1, voxel, border):
-    """Mesh of ``root`` inside the slab ``z0 <= z <= z1`` (faces off the tile's border only)."""
-    x0, y0, x1, y1 = extent
-    box = F.Box([(x0 + x1) / 2, (y0 + y1) / 2, (z0 + z1) / 2], [(x1 - x0) / 2, (y1 - y0) / 2, (z1 - z0) / 2])
-    m = polygonize_banded(F.Intersection(root, box), voxel)
-    mesh = trimesh.Trimesh(np.asarray(m.vertices, np.float64), np.asarray(m.faces, np.int64), process=False)
-    c = mesh.triangles_center
-    inner = ((c[:, 0] > x0 + border) & (c[:, 0] < x1 - border) & (c[:, 1] > y0 + border)
-             & (c[:, 1] < y1 - border) & (c[:, 2] > z0 + 0.5 * voxel) & (c[:, 2] < z1 - 0.5 * voxel))
-    return mesh, inner
-
-
 def _turbulence(seed, wavelength, amplitude, octaves, **extra):
     """A ``resistance_turbulence`` table (fBm resistance variations)."""
     return {"type": "resistance_turbulence", "wavelength": float(wavelength), "amplitude": amplitude,
@@ -351,6 +340,13 @@ def sea(run: Amplification) -> None:
     # gentle shore is a crater): faces of at least 30 deg, or less where the DEM's cells
     # are too coarse to show the coastal cliff that steep (a cliff C high over 3 cells).
     cos_cliff = math.cos(min(math.radians(30.0), math.atan(C / (3.0 * cell))))
+    coast = run.scales.get("coast_cliff_m")
+    if coast is not None and coast < MIN_COAST_CLIFF:  # a beach or a shelf: no cliff to undercut
+        run.stats["nothing"] = (f"no coastal cliff: the land by the sea rises {coast:.2g} m "
+                                f"(sea caves need a cliff of {MIN_COAST_CLIFF:g} m)")
+        for k in range(run.sea_steps):
+            run.timer.step(f"sea erosion step {k + 1}")
+        return
     mesh = heightfield_mesh(H, extent, run.mesh_step)
     weight = None
     steps_arrays = []
@@ -381,12 +377,19 @@ def sea(run: Amplification) -> None:
         inline = [{"type": "skeletal_set", "combine": "sum", **{n: v for n, v in x.items()}}
                   for x in steps_arrays]
         current = tree.add(f"_sea_step{k + 1}", {"type": "sum", "children": ["terrain"] + inline})
-        mesh, weight = _band_mesh(current, extent, run.sea_level - sea_range - 2 * max_r,
-                                  run.sea_level + sea_range + 2 * max_r,
-                                  # The band mesh only guides sampling and rays: at most ~384
-                                  # voxels across a large tile (small tiles: one cell).
-                                  max(0.25 * max_r, max(W, D) / 384.0), 2 * cell)
+        # The band mesh only guides sampling and rays: at most ~384 voxels across a large
+        # tile. Its slab is at least 4 voxels thick: a thinner one can fall between two rows
+        # of grid vertices and hold no surface (a large tile of a low coast).
+        voxel = max(0.25 * max_r, max(W, D) / 384.0)
+        half = max(sea_range + 2 * max_r, 2.0 * voxel)
+        band = slab_mesh(current, extent, run.sea_level - half, run.sea_level + half, voxel, 2 * cell)
         tree.builder.forget(f"_sea_step{k + 1}")
+        if band is None:  # no surface left in the band: keep the steps made
+            run.stats["nothing"] = f"sea erosion stopped after step {k + 1}: no coast left in the sea band"
+            for j in range(k + 1, run.sea_steps):
+                run.timer.step(f"sea erosion step {j + 1}")
+            break
+        mesh, weight = band
     out = run.carve("sea_erosion", steps_arrays)
     if out:
         run.children.append(out[0])

@@ -133,7 +133,10 @@ def _local_mesh(root, box, voxel, margin):
     """Mesh of the amplified field in ``box`` grown by ``margin``, without the box's cut faces."""
     lo, hi = np.asarray(box[0]) - margin, np.asarray(box[1]) + margin
     cut = F.Box(0.5 * (lo + hi), 0.5 * (hi - lo))
-    m = polygonize_banded(F.Intersection(root, cut), voxel, normals=False)
+    try:
+        m = polygonize_banded(F.Intersection(root, cut), voxel, normals=False)
+    except ValueError:  # no surface in the box at this voxel: no view of this landform
+        return None
     V, Fc = np.asarray(m.vertices, np.float64), np.asarray(m.faces, np.int64)
     if not len(Fc):
         return None
