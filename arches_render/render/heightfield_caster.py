@@ -341,7 +341,7 @@ class HeightfieldCaster:
         out = dr.while_loop(state, lambda *s: s[6] & (s[8] < budget) & (s[7] < MAX_ROUNDS), outer,
                             label="heightfield_hybrid")
         # Lanes still alive used up their steps or rounds: unresolved, a hit at
-        # their last point (ray_stats), never a miss.
+        # their last point (TraceResult), never a miss.
         t_last = dr.select(out[3] == NEAR, out[2], out[0])
         return TraceResult.of(out[4], dr.select(out[4], out[5], t_last), out[8] + out[7], out[6], active,
                               max_steps)

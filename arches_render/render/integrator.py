@@ -158,9 +158,12 @@ class _ImplicitPathImpl:
         hit, t = res.hit, res.t
         # Normals (four gradient taps and a value) only where the field was hit:
         # packets without such a lane skip them.
-        p, n = dr.if_stmt((ray.o, ray.d, t, cone or ()), hit,
-                          lambda o, d, t, cone: self.tracer.surface(o + d * t, t, d, cone or None),
-                          lambda o, d, t, cone: (o + d * t, -d), label="field_surface")
+        def on_surface(o, d, t, cone):
+            p, n = self.tracer.surface(o + d * t, t, d, cone or None)
+            return mi.Point3f(p), mi.Vector3f(n)
+
+        p, n = dr.if_stmt((ray.o, ray.d, t, cone or ()), hit, on_surface,
+                          lambda o, d, t, cone: (mi.Point3f(o + d * t), mi.Vector3f(-d)), label="field_surface")
         # Lift the point off the surface so that rays spawned here start in air: a
         # tenth of the hit tolerance, at least a few float32 ulps of the position (a
         # fixed fraction of the scene's size would be metres on a 1000 km tile).

@@ -170,8 +170,8 @@ class SphereTracer:
         ``max_steps`` steps is *exhausted* and goes on for up to
         ``SECOND_PASS_FACTOR * max_steps`` more; one that spends those too is
         *unresolved* and reported as a hit at its last point (for a shadow ray:
-        occluded), never as a miss (:mod:`arches_render.render.ray_stats`). Both
-        budgets run in one loop: inside Mitsuba's megakernel a loop ends per SIMD
+        occluded), never as a miss; the ``exhausted`` and ``unresolved`` AOVs
+        count them (:mod:`.aovs`). Both budgets run in one loop: inside Mitsuba's megakernel a loop ends per SIMD
         packet, so a packet whose lanes are all done stops whatever the budget, and
         a second loop would only emit the field's code twice.
 
