@@ -171,3 +171,38 @@ def test_grazing_rays_in_carved_terrain_hit_the_first_sign_change():
     assert np.all(t[hit] >= t_band[hit] - 0.02), "a ray stopped before the tolerance band"
     # A reported hit without a sampled crossing must be a tangency inside the band.
     assert np.all(band.any(axis=0)[hit & ~found])
+
+
+def test_footprint_field_of_the_terrain_skips_octaves_and_keeps_its_bounds():
+    """Seen from afar (cone radius ~ the fBm's wavelength), the implicit heightfield
+    evaluates its footprint field: the value differs from full detail (level of
+    detail does something), and its slopes and distance bounds hold for that field."""
+    from arches_render.field.lod import Footprint
+    origin, rate = np.array([60.0, -400.0, 200.0]), 0.01
+
+    def footprint_field(q):
+        fp = Footprint(mi.Float(rate * np.linalg.norm(q - origin, axis=1).astype(np.float32)), mi.Float(rate))
+        f, _ = TERRAIN.eval_bounds(_vec(q), (), None, fp)
+        return f.numpy().astype(np.float64)
+
+    p = _near_surface_points(TERRAIN, 1500, seed=9)
+    fp = Footprint(mi.Float(rate * np.linalg.norm(p - origin, axis=1).astype(np.float32)), mi.Float(rate))
+    radii = CARVED.slope_radii
+    f, (d,), slopes = TERRAIN.eval_local(_vec(p), (0.0,), None, fp, radii)
+    dr.eval(f, d, slopes)
+    assert np.abs(f.numpy() - evaluate(TERRAIN, p)).max() > 0.05
+    rng = np.random.default_rng(2)
+    for S, rad in zip(slopes, radii):
+        dirs = rng.normal(size=p.shape)
+        dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+        q1 = p + dirs * rad * 0.5
+        q2 = q1 + rng.normal(size=p.shape) * 0.02 * rad
+        ratio = np.abs(footprint_field(q1) - footprint_field(q2)) / np.linalg.norm(q1 - q2, axis=1)
+        assert np.all(ratio <= S.numpy() * (1 + 1e-3) + 2e-5 / np.linalg.norm(q1 - q2, axis=1))
+    d = d.numpy().astype(np.float64)
+    sel = d > 0
+    dirs = rng.normal(size=(sel.sum(), 3))
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    q = p[sel] + dirs * (d[sel, None] * rng.uniform(0, 1, (sel.sum(), 1)) ** (1 / 3) * 0.999)
+    assert footprint_field(q).max() < 1e-4
+    assert sel.mean() > 0.3

@@ -67,6 +67,12 @@ bilinear slope (plus the elevation primitives' and the fBm's) instead of the DEM
 steepest cell anywhere. ``|grad f_P| <= (2T/R) max |g'|`` over ``d(q, P) / R`` in
 ``[(d - rad)/R, (d + rad)/R]``, and ``|grad f| <= max`` of the two.
 
+Footprint level of detail (:mod:`arches_render.field.lod`): with a ray's footprint
+the fBm keeps the octaves the cone resolves (:class:`~arches_render.field.lod.OctaveLOD`);
+its range is at most the full one (the mipmap clearance above holds) and its slope
+at most ``1 + kappa s`` times the full one, which every slope and Hart bound of the
+footprint field takes.
+
 References
 ----------
 Paris, A., Galin, E., Peytavie, A., Guérin, E., Gain, J. (2019). Terrain
@@ -86,6 +92,7 @@ import numpy as np
 from arches_render.backend import variant
 from arches_render.field import Heightfield
 from arches_render.field.heightfield import height_grid
+from arches_render.field.lod import OctaveLOD
 from arches_render.field.node import box_distance, opaque_float
 from arches_render.field.noise import fbm, fbm_lipschitz, fbm_range
 
@@ -166,6 +173,8 @@ class ImplicitHeightfield(Heightfield):
             self._amp_inv_wl = opaque_float(1.0 / p["wavelength"])
             self._amp_lac, self._amp_gain = opaque_float(p["lacunarity"]), opaque_float(p["gain"])
             self._amp_seed = dr.opaque(mi.UInt32, int(p["seed"]) & 0xFFFFFFFF)
+            # Footprint level of detail of the sub-cell fBm (module docstring).
+            self._lod = OctaveLOD(p["octaves"], p["lacunarity"], p["gain"], p["amplitude"], p["wavelength"])
         self.extra_hi, self.extra_lo = extra_hi, extra_lo
 
         hmin, hmax = float(H.min()) + extra_lo, float(H.max()) + extra_hi
@@ -194,8 +203,10 @@ class ImplicitHeightfield(Heightfield):
         self._inv_Lh = opaque_float(1.0 / math.sqrt(1.0 + self.slope_bound ** 2))
 
     # -- elevation ------------------------------------------------------------------
-    def elevation(self, x, y):
-        """``h(x, y)`` (``mi.Float`` each): grid + elevation primitives + fBm."""
+    def elevation(self, x, y, level=None):
+        """``h(x, y)`` (``mi.Float`` each): grid + elevation primitives + fBm (``level``:
+        the fBm's footprint level, :class:`~arches_render.field.lod.OctaveLOD`; None:
+        every octave)."""
         h = self.height(x, y)
         if self.bumps is not None:
             h = h + self.bumps.field(mi.Point3f(x, y, 0.0))
@@ -206,7 +217,8 @@ class ImplicitHeightfield(Heightfield):
                 e = dr.minimum(dr.minimum(x - self._x0, self._x1 - x), dr.minimum(y - self._y0, self._y1 - y))
                 u = dr.clip((e - self._amp_border) * self._amp_inv_taper, 0.0, 1.0)
                 a = a * (u * u * (3.0 - 2.0 * u))
-            h = h + a * fbm(q, int(self.amp["octaves"]), self._amp_lac, self._amp_gain, self._amp_seed)
+            lvl = () if level is None else (level,)
+            h = h + a * fbm(q, int(self.amp["octaves"]), self._amp_lac, self._amp_gain, self._amp_seed, *lvl)
         return h
 
     def elevation_np(self, x, y) -> np.ndarray:
@@ -230,10 +242,10 @@ class ImplicitHeightfield(Heightfield):
     def eval_bounds(self, p, levels, direction=None, footprint=None):
         return self.eval_local(p, levels, direction, footprint)[:2]
 
-    def local_slopes(self, v, d_prism, k, radii):
+    def local_slopes(self, v, d_prism, k, radii, grow=1.0):
         """Bounds of ``|grad f|`` in the balls of radii ``radii`` around a point of DEM
         cell ``k`` where ``v = h - z`` and ``d(p, P) = d_prism`` (module docstring,
-        "Local slopes")."""
+        "Local slopes"); ``grow``: ``1 + kappa s`` of a footprint field."""
         S_near = dr.gather(mi.Float, self._near_slope, k) + self.extra_slope_np
         c = 6.0 * self.T_np / self.R_np - 3.0
         peak = (c - 1.0) / (2.0 * c) if c > 0.0 else 0.0  # of s'(u) = (1 - u)(1 + c u)
@@ -241,7 +253,7 @@ class ImplicitHeightfield(Heightfield):
         for rad in radii:
             # The cell's 3x3 neighbourhood holds a ball of one cell edge.
             S = S_near if rad <= self.cell_np else mi.Float(self.slope_bound)
-            Lh = dr.sqrt(1.0 + S * S) * (1.0 + 1e-6)
+            Lh = dr.sqrt(1.0 + S * S) * (1.0 + 1e-6) * grow
             lo, hi = v - rad * Lh, v + rad * Lh
             ua = dr.select((lo <= 0.0) & (hi >= 0.0), 0.0, dr.minimum(dr.abs(lo), dr.abs(hi))) * self._inv_R
             ub = dr.maximum(dr.abs(lo), dr.abs(hi)) * self._inv_R
@@ -253,8 +265,12 @@ class ImplicitHeightfield(Heightfield):
         return tuple(out)
 
     def eval_local(self, p, levels, direction=None, footprint=None, radii=()):
-        """``(f, ds, slopes)``: :meth:`eval_bounds` and the :meth:`local_slopes` of ``radii``."""
-        v = self.elevation(p.x, p.y) - p.z
+        """``(f, ds, slopes)``: :meth:`eval_bounds` and the :meth:`local_slopes` of ``radii``;
+        with a ``footprint``, of the footprint field (the fBm's finer octaves skipped,
+        slopes grown by ``1 + kappa s``)."""
+        level = self._lod.level(footprint) if self.amp is not None else None
+        grow = 1.0 + self.lod_kappa * footprint.rate if level is not None else 1.0
+        v = self.elevation(p.x, p.y, level) - p.z
         fP, dP = self._prism(p)
         f = dr.minimum(sigmoid_dr(v, self._R, self._a, self._b), fP)
         u = dr.clip((p.x - self._x0) * self._inv_dx, 0.0, self.nx - 1.0)
@@ -270,7 +286,7 @@ class ImplicitHeightfield(Heightfield):
             # Below the surface (c < 0, asked by the sum's caps) s(v) >= -c > 0 only
             # gives v >= -c / S_SIGMA.
             shift = c * dr.select(mi.Bool(c >= 0.0), self._inv_k, self._inv_S)
-            dT = dr.maximum(-v - shift, 0.0) * self._inv_Lh
+            dT = dr.maximum(-v - shift, 0.0) * self._inv_Lh * (1.0 / grow)
             for clearance, radius in zip(above, self._radii):
                 if direction is None:
                     reach = dr.minimum(radius, clearance - shift)
@@ -281,11 +297,17 @@ class ImplicitHeightfield(Heightfield):
             rc = self._R * dr.sqrt(dr.maximum(1.0 - dr.cbrt(wc), 0.0))
             d = dr.maximum(dT, dr.maximum(dP - rc, 0.0))
             ds.append(dr.select(c >= self._T, 0.0, d))
-        return f, tuple(ds), self.local_slopes(v, dP, k, radii)
+        return f, tuple(ds), self.local_slopes(v, dP, k, radii, grow)
 
     def bounds(self):
         r0 = R0_FACTOR * self.R_np
         return self.prism_lo - np.array([r0, r0, r0]), self.prism_hi + np.array([r0, r0, 0.0])
+
+    @property
+    def lod_kappa(self):
+        # Only the fBm has levels: the footprint field's slope is at most the full
+        # one times 1 + kappa s (arches_render.field.lod), L included.
+        return self._lod.kappa if self.amp is not None else 0.0
 
     @property
     def lipschitz(self):
