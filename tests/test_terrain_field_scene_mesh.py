@@ -14,7 +14,8 @@ from arches_render.generators.terrain import geology as G  # noqa: E402
 from arches_render.generators.terrain.erosion_node import Erosion  # noqa: E402
 from arches_render.generators.terrain.implicit_heightfield import ImplicitHeightfield  # noqa: E402
 from arches_render.generators.terrain.operators import LocalWarp, Sum  # noqa: E402
-from arches_render.generators.terrain.skeletal_set import SkeletalSet, load_npz, save_npz  # noqa: E402
+from arches_render.generators.terrain.skeletal_files import load_npz, save_npz  # noqa: E402
+from arches_render.generators.terrain.skeletal_set import SkeletalSet  # noqa: E402
 from arches_render.generators.terrain.banded import BandStats, polygonize_banded, polygonize_dense  # noqa: E402
 from arches_render.scene import SceneError, load_scene  # noqa: E402
 

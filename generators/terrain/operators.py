@@ -15,8 +15,8 @@ local slope bounds where they have them: see :func:`local_lipschitz`) is used. A
 carving set has ``M = 0`` and the terrain keeps its own tight bounds.
 
 Local slopes (issue 21): Hart's bound uses the sum of the operands' slope bounds
-in a ball of radius ``rad`` around ``p`` (:func:`eval_local`), for three radii (one
-cell edge of the finest primitive set, 1/8 and 1/64 of it), so a ray near a steep
+in a ball of radius ``rad`` around ``p`` (:func:`eval_local`), for two radii (the finest
+primitive set's ``local_radius``, an eighth of its cell edge, and 1/8 of that), so a ray near a steep
 cave wall takes the step of the small ball, ``min(rad, (-f - c) / S(rad))``, and a
 ray in open space that of the large one.
 
@@ -227,14 +227,14 @@ class Sum(Node):
     @property
     def slope_radii(self):
         """Radii of the balls in which the operands bound their slopes (``eval_local``):
-        the smallest operand's ``local_radius`` and two shorter ones (a ray near a
-        steep wall needs a small ball, one in open space a large one); ``()`` when no
+        the smallest operand's ``local_radius`` and one eight times shorter (a ray
+        near a steep wall needs a small ball, one in open space a large one); ``()`` when no
         operand has local slopes."""
         rs = [float(c.local_radius) for c in self.children if getattr(c, "local_radius", None)]
         if not rs:
             return ()
         m = min(rs)
-        return (m, m / 8.0, m / 64.0)
+        return (m, m / 8.0)
 
     def bounds(self):
         boxes = [c.bounds() for c in self.children]

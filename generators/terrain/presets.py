@@ -78,7 +78,7 @@ from .geology import resistance
 from .river_erosion import river_erosion
 from .sea_erosion import sea_erosion_step
 from .shallow_erosion import ErosionPrimitives, sample_mesh
-from .skeletal_set import save_npz
+from .skeletal_files import save_npz
 
 __all__ = ["PRESETS", "Preset", "Amplification", "NodeTables", "StepTimer", "SEA_STEPS", "MAX_PRIMITIVES"]
 

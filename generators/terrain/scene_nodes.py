@@ -3,7 +3,7 @@
 Merged into the core node types by :func:`arches_render.scene.nodes.node_types`.
 Lengths are metres; ``[ ]`` marks an optional key and its default. Arrays of
 primitives come from ``file = "x.npz"`` (relative to the scene file, arrays as in
-:data:`.skeletal_set.NPZ_KEYS`, written by :func:`.skeletal_set.save_npz` or
+:data:`.skeletal_files.NPZ_KEYS`, written by :func:`.skeletal_files.save_npz` or
 ``numpy.savez``; no pickles) or inline keys of the same names.
 
 =======================  ==================================================================
@@ -53,7 +53,8 @@ from . import geology as G
 from .erosion_node import Erosion
 from .implicit_heightfield import ImplicitHeightfield
 from .operators import LocalWarp, Sum
-from .skeletal_set import NPZ_KEYS, SkeletalSet, load_npz
+from .skeletal_files import NPZ_KEYS, load_npz
+from .skeletal_set import SkeletalSet
 
 #: The arrays of a ``bumps`` file (centres, radii, heights of the heightfield's bumps).
 BUMP_SPECS = {"center": Spec(("n", 2)), "radius": Spec(("n",), scalar=True, lo=0.0, lo_open=True),

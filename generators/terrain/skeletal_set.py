@@ -70,8 +70,8 @@ supports; ``FAR`` above ``value_max``.
 Local slopes (issue 21; :meth:`SkeletalSet.eval_local`). The cell bounds above sum
 ``|e| G_SLOPE L_i`` over every primitive near a cell, about ten times the true
 gradient at a cave wall, where a primitive's falloff is far from its steepest point.
-Within the ball ``B(p, rad)``, ``rad`` at most one cell edge, only the primitives of
-``p``'s near list act, and the star distance of each stays in
+Within the ball ``B(p, rad)``, ``rad`` at most ``local_radius`` (``SLOPE_REACH`` cell
+edges), only the primitives of ``p``'s slope list (supports grown by that much) act, and the star distance of each stays in
 ``[x - rad L_i, x + rad L_i]``, ``x = min(d~(p), 1)``: ``d~`` is ``L_i``-Lipschitz where it is
 below 1, and a path from ``p`` into the support enters it at ``d~ = 1``. Hence
 
@@ -109,31 +109,20 @@ Wyvill, B., Guy, A., Galin, E. (1999). Extending the CSG tree. CGF 18(2).
 
 from __future__ import annotations
 
-import io
-from pathlib import Path
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from arches_render.atomic import atomic_write
 from arches_render.field.lod import OctaveLOD
-from arches_render.npzfile import write_npz
 from arches_render.field.node import Node, box_distance, opaque_float
 from arches_render.field.noise import fbm, fbm_lipschitz, fbm_range
 from arches_render.field.primitive_set import empty_distance, grid_lists
-from arches_render.scene.array_files import Spec, read_arrays
 
 from .falloff import G_SLOPE, falloff_slope_max, g_dr
 
-#: Array names of the ``.npz`` format (``a`` and ``radius`` required).
-NPZ_KEYS = ("a", "b", "radius", "energy", "core", "group")
-#: What each array of a primitive file must be (:func:`arches_render.scene.array_files.read_arrays`).
-NPZ_SPECS = {"a": Spec(("n", 3)), "b": Spec(("n", 3), required=False),
-             "radius": Spec(("n",), scalar=True, lo=0.0, lo_open=True),
-             "energy": Spec(("n",), scalar=True, required=False),
-             "core": Spec(("n",), scalar=True, required=False, lo=0.0),
-             "group": Spec(("n",), required=False, lo=0.0)}
+#: Largest radius of the balls in which ``eval_local`` bounds slopes, in cell edges.
+SLOPE_REACH = 0.125
 
 #: Distance bound of an empty level set (finite, so that ``0 * FAR`` stays 0).
 FAR = 1e10
@@ -260,14 +249,22 @@ class SkeletalSet(Node):
         # their distance bounds (module docstring) use the empty cells and, per
         # primitive, the region that holds {F_i >= u}, over lists of the support boxes
         # grown by one cell edge (a primitive left out is that far away).
-        # Near lists serve the local slope bounds of every set (eval_local) too.
-        near = grid_lists(lo_p - cell, hi_p + cell, self.grid_lo, cell, res)
-        self._near_lists = tuple(mi.UInt32(v) for v in near)
-        self.near_len = len(near[2])
+        # Local slopes (eval_local) are bounded in balls of up to SLOPE_REACH cell
+        # edges: lists of the supports grown by that much hold every primitive that
+        # can act there, and stay nearly as short as the cell lists (lists grown by a
+        # whole cell were 5-10x longer in dense karst lattices, and a ball that
+        # large holds the steepest point of some falloff anyway).
+        self.local_radius = SLOPE_REACH * cell
+        slope = grid_lists(lo_p - self.local_radius, hi_p + self.local_radius, self.grid_lo, cell, res)
+        self._slope_lists = tuple(mi.UInt32(v) for v in slope)
+        self.slope_len = len(slope[2])
         self._empty = self._near = None
+        self.near_len = 0
         if self.value_max > 0:
             self._empty = mi.Float(empty_distance(lo_p, hi_p, self.grid_lo, cell, res).astype(np.float32))
-            self._near = self._near_lists
+            near = grid_lists(lo_p - cell, hi_p + cell, self.grid_lo, cell, res)
+            self._near = tuple(mi.UInt32(v) for v in near)
+            self.near_len = len(near[2])
             self._reach_R = mi.Float(np.ascontiguousarray(R * (1.0 + span), dtype=np.float32))
             if self.noise:
                 nz = self.noise
@@ -388,8 +385,8 @@ class SkeletalSet(Node):
         return 3.0 + per * min(self.max_per_cell, 8)
 
     def nbytes(self):
-        per_cell = 24 + (4 if self._near is not None else 0)  # start, count, L, M, near, [empty]
-        near = self.near_len * 4 + self.n * 4 * (2 if self._near is not None else 1)
+        per_cell = 24 + (12 if self._near is not None else 0)  # start, count, L, M, slope, [empty, near]
+        near = (self.near_len + self.slope_len) * 4 + self.n * 4 * (2 if self._near is not None else 1)
         return 64 + self.n * 12 * 4 + int(np.prod(self.res)) * per_cell + self.list_len * 4 + near
 
     # -- evaluation ---------------------------------------------------------------
@@ -576,7 +573,7 @@ class SkeletalSet(Node):
 
     def eval_local(self, p, levels, direction=None, footprint=None, radii=()):
         """``(f, ds, slopes)``: :meth:`eval_bounds` and, for each radius of ``radii``
-        (at most one cell edge, :attr:`local_radius`), a bound of ``|grad f|`` in the
+        (at most :attr:`local_radius`), a bound of ``|grad f|`` in the
         ball of that radius around ``p`` (module docstring, "Local slopes"), from the
         same loop over the primitives."""
         # Local Hart bound: min(r, (-f - c) / L_local) (the ball of radius r has slope
@@ -589,7 +586,10 @@ class SkeletalSet(Node):
         us = [self._threshold - c for c in levels] if self._near is not None or carving else []
         slopes = ()
         if us or radii:
-            F, geo, slopes = self._accumulate(p, self._near_lists, us, footprint, radii)
+            # Caps need the near lists (a superset of the slope lists); cores need
+            # only the primitives whose support holds p.
+            lists = self._near if self._near is not None else self._slope_lists
+            F, geo, slopes = self._accumulate(p, lists, us, footprint, radii)
             f = F - self._threshold
         elif footprint is not None:
             f = self._accumulate(p, (self._start, self._count, self._index), (), footprint)[0] - self._threshold
@@ -631,11 +631,6 @@ class SkeletalSet(Node):
             ds = [dr.select(self._threshold - c > 0.0, FAR, d) for d, c in zip(ds, levels)]
         return f, tuple(ds), tuple(slopes)
 
-    @property
-    def local_radius(self):
-        """The largest radius :meth:`eval_local` bounds slopes in: one cell edge."""
-        return self.cell
-
     def __repr__(self):
         return f"SkeletalSet(n={self.n}, combine={self.combine!r}, noise={bool(self.noise)})"
 
@@ -647,19 +642,3 @@ def _per_prim(v, n, name):
     if arr.shape != (n,):
         raise ValueError(f"{name} must be one number or an ({n},) array (got shape {arr.shape})")
     return arr.copy()
-
-
-def save_npz(path, **arrays) -> None:
-    """Write primitive arrays (``NPZ_KEYS``) to ``path`` atomically (no pickles)."""
-    unknown = set(arrays) - set(NPZ_KEYS)
-    if unknown:
-        raise ValueError(f"unknown array(s) {sorted(unknown)}; allowed: {', '.join(NPZ_KEYS)}")
-    buf = io.BytesIO()
-    write_npz(buf, {k: np.asarray(v) for k, v in arrays.items() if v is not None})
-    with atomic_write(Path(path)) as f:
-        f.write(buf.getvalue())
-
-
-def load_npz(path) -> dict:
-    """Read the primitive arrays of ``path`` (keys of ``NPZ_KEYS`` present in it), checked against :data:`NPZ_SPECS`."""
-    return read_arrays(path, NPZ_SPECS, "primitive arrays")
