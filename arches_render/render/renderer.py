@@ -136,7 +136,8 @@ def attach_material_nodes(bsdf, desc, name) -> None:
 
 
 def set_pixel_spread(scene, fov=None, width=None) -> None:
-    """Tell every triplanar BSDF of a built scene the camera's pixel size (its detail footprint).
+    """Tell every triplanar BSDF of a built scene, and the integrator, the camera's pixel size
+    (the detail footprint and the camera rays' cones).
 
     Parameters
     ----------
@@ -156,6 +157,8 @@ def set_pixel_spread(scene, fov=None, width=None) -> None:
         fov = float(mi.traverse(sensor)["x_fov"][0])
     width = int(sensor.film().size()[0]) if width is None else int(width)
     spread = pixel_spread(fov, width)
+    if hasattr(scene.integrator(), "set_pixel_angle"):  # the field's ray cones (level of detail)
+        scene.integrator().set_pixel_angle(spread)
     bsdfs = [shape.bsdf() for shape in scene.shapes()]
     bsdfs.append(getattr(scene.integrator(), "field_bsdf", None))
     done = set()
