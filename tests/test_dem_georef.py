@@ -159,7 +159,7 @@ def test_amplify_geographic_geotiff_without_cell_size(tmp_path, capsys):
     assert any(line.startswith("DEM: resampled 40x40 cells") for line in head), head
     geo = [line for line in head if line.startswith("Georeference: CRS EPSG:4326")]
     assert geo and "lat 45.0000000" in geo[0] and "lon 7.0055556" in geo[0], head
-    assert np.load(tmp_path / "geo.heights.npy").shape == (56, 40)
+    assert np.load(tmp_path / "geo.heights.npy", allow_pickle=False).shape == (56, 40)
     import tomllib
     ext = tomllib.loads(out.read_text())["nodes"]["terrain"]["extent"]
     true_dx, true_dy = wgs84_metres(45.0, ARCSEC, ARCSEC)
@@ -169,7 +169,7 @@ def test_amplify_geographic_geotiff_without_cell_size(tmp_path, capsys):
     # The override wins: square cells given, nothing resampled.
     rc, stdout, err = _amplify(capsys, path, "-o", tmp_path / "over.toml", "--cell-size", "30,30")
     assert rc == 0 and "resampled" not in stdout, stdout
-    assert np.load(tmp_path / "over.heights.npy").shape == (40, 40)
+    assert np.load(tmp_path / "over.heights.npy", allow_pickle=False).shape == (40, 40)
 
 
 def test_amplify_reads_npz_cell_size_and_asc(tmp_path, capsys):
@@ -242,4 +242,4 @@ def test_web_elevation_tiles_decode_to_metres(tmp_path, capsys, encoding, tol):
     rc, stdout, err = _amplify(capsys, tmp_path / "tile.png", "-o", tmp_path / "t.toml", "--encoding", encoding,
                                "--cell-size", 20, "--preset", "river")
     assert rc == 0 and "heights 32x32 at 20 m" in stdout, err + stdout
-    assert float(np.load(tmp_path / "t.heights.npy").min()) == pytest.approx(float(H.min()), abs=0.06)
+    assert float(np.load(tmp_path / "t.heights.npy", allow_pickle=False).min()) == pytest.approx(float(H.min()), abs=0.06)

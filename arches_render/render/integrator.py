@@ -204,7 +204,7 @@ class _ImplicitPathImpl:
     # -- estimator ---------------------------------------------------------------
     def sample(self, scene, sampler, ray, medium=None, active=True):
         bsdf_ctx = mi.BSDFContext()
-        cone0 = self.camera_cone(sampler, ray)  # before the differentials are dropped
+        cone0 = self.camera_cone(sampler, ray)
         ray = mi.Ray3f(ray)
         L = mi.Spectrum(0.0)
         beta = mi.Spectrum(1.0)
