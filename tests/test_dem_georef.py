@@ -88,6 +88,7 @@ def test_projected_utm_geotiff_with_heights_in_feet(tmp_path):
     dem = read_dem(path)
     assert dem.cell == pytest.approx((10.0, 10.0))
     assert dem.georef.crs == "EPSG:32633" and "UTM zone 33N" in dem.georef.crs_name and not dem.georef.geographic
+    # rel=1e-6: the converted heights are stored as float32 (7 significant digits).
     assert dem.heights[-1] == pytest.approx(0.3048 * H[0].astype(np.float64), rel=1e-6)
     assert any("feet converted to metres" in n for n in dem.notes), dem.notes
     assert dem.georef.centre() == pytest.approx((500250.0, 5000200.0))
@@ -100,9 +101,10 @@ def test_state_plane_in_us_feet_and_pixel_is_point_transformation(tmp_path):
     path = write_geotiff(tmp_path / "ny.tif", H, (10.0, 10.0), (980000.0, 200000.0), transform=True, model=1,
                          raster=2, projected=2263, vertical=9003)
     dem = read_dem(path)
+    # 10 US survey feet = 3.0480061 m; rel=1e-5 is the 7 digits written here.
     assert dem.cell == pytest.approx((3.048006, 3.048006), rel=1e-5)
     assert dem.georef.corner == pytest.approx((979995.0, 200005.0))
-    assert dem.heights[0, 0] == pytest.approx(float(H[-1, 0]) * 1200 / 3937, rel=1e-6)
+    assert dem.heights[0, 0] == pytest.approx(float(H[-1, 0]) * 1200 / 3937, rel=1e-6)  # float32 heights
 
 
 def test_esri_ascii_grid_with_no_data(tmp_path):

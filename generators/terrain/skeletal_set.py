@@ -49,45 +49,9 @@ bound the slope and the value of ``F`` in the ball of one cell edge around any p
 of the cell (:meth:`SkeletalSet.local_lipschitz`); the erosion node and the sum use
 them so that one crowded cluster does not slow rays everywhere.
 
-Distance bounds below the threshold (levels ``c`` with ``u = threshold - c > 0``, the
-set ``{F >= u}``; the sum's caps ask for them, see :mod:`.operators`). Hart's bound
-is poor there: ``|grad F|`` reaches ``e G_SLOPE / D`` (30 for the hoodoos preset), so
-the bounds are geometric, per primitive. For ``"max"``, ``{F >= u}`` is the union of
-``{F_i >= u} = {rho <= x D}``, ``x = sqrt(1 - (u / e_i)^(1/3))`` (none if ``e_i < u``);
-for ``"sum"`` only ``F_i > 0`` is implied, ``x = 1``, over the positive energies. Then
-
-    d_i >= rho(p) - x D_max                                   (D <= D_max), and
-    d_i >= min(r / 2, (rho(p) - x D(p)) / (1 + x L_D))         (with the noise at p),
-
-the second because within ``r/2`` of ``p``, ``rho`` is 1-Lipschitz and
-``|grad D| <= L_D = R A L_n / lambda (sigma_s + 2 (c + R) / r)`` (the slope bound
-above with ``r >= r(p) / 2``). It matters in the noise's margin, between the noisy
-surface and its ``D_max`` envelope, where rays graze. The loop runs over *near* lists
-(support boxes grown by one cell edge ``m``), so ``d >= min(m, min_i d_i)``, and at
-least the empty-cell distance; outside the grid, the distance to the box of all
-supports; ``FAR`` above ``value_max``.
-
-Local slopes (issue 21; :meth:`SkeletalSet.eval_local`). The cell bounds above sum
-``|e| G_SLOPE L_i`` over every primitive near a cell, about ten times the true
-gradient at a cave wall, where a primitive's falloff is far from its steepest point.
-Within the ball ``B(p, rad)``, ``rad`` at most ``local_radius`` (``SLOPE_REACH`` cell
-edges), only the primitives of ``p``'s slope list (supports grown by that much) act, and the star distance of each stays in
-``[x - rad L_i, x + rad L_i]``, ``x = min(d~(p), 1)``: ``d~`` is ``L_i``-Lipschitz where it is
-below 1, and a path from ``p`` into the support enters it at ``d~ = 1``. Hence
-
-    |grad F| <= sum_i |e_i| L_i max { |g'(u)| : u in [x_i - rad L_i, x_i + rad L_i] }
-
-in the ball (curves: their members' maximum; ``"max"`` sets: the maximum), where
-``|g'(u)| = 6 u (1 - u^2)^2`` rises to ``G_SLOPE`` at ``u = 1/sqrt 5`` and falls to 0 at 1
-(:func:`.falloff.falloff_slope_max`). Where the noise is skipped (``rho >= D_max``)
-``x = 1`` is exact too. A footprint multiplies ``L_i`` by ``1 + kappa s``.
-
-Cores (carving sets, every ``e_i <= 0``). Then ``F <= F_i`` for each ``i``, so
-``F >= u`` (``u < 0``) needs ``e_i g(d~_i) >= u``, i.e. ``d~_i >= x = sqrt(1 - (u/e_i)^(1/3))``
-(where ``|e_i| > |u|``), i.e. ``rho_i >= x D >= x D_min``; ``rho_i`` being 1-Lipschitz,
-the distance from ``p`` to ``{F >= u}`` is at least ``max_i (x D_min,i - rho_i(p))``. The
-sum asks a carving set for ``u = -(c + T)`` (the terrain is at most ``T``), and this
-lets rays cross the carved air of a cave or an undercut in long steps.
+Distance bounds below the threshold (the sum's caps), local slopes in small balls
+and the cores of carving sets are per-primitive bounds, derived and computed in
+:mod:`.skeletal_bounds`; the loop over a point's list here combines them.
 
 Footprint level of detail (:mod:`arches_render.field.lod`): with a footprint the
 star noise keeps the octaves the cone resolves. Its range is at most the full one
@@ -119,7 +83,8 @@ from arches_render.field.node import Node, box_distance, opaque_float
 from arches_render.field.noise import fbm, fbm_lipschitz, fbm_range
 from arches_render.field.primitive_set import empty_distance, grid_lists
 
-from .falloff import G_SLOPE, falloff_slope_max, g_dr
+from .falloff import G_SLOPE, g_dr
+from .skeletal_bounds import core_bound, level_bound, local_slope
 
 #: Largest radius of the balls in which ``eval_local`` bounds slopes, in cell edges.
 SLOPE_REACH = 0.125
@@ -436,40 +401,16 @@ class SkeletalSet(Node):
                           label="star_noise")
         return (g, rho, r, D) if geometry else g
 
-    def _level_bound(self, k, e, geometry, u, rate=None):
-        """Lower bound of the distance from ``p`` to ``{F_k >= u}`` (``u > 0``), or
-        ``None`` where primitive ``k`` cannot reach ``u`` (module docstring, "Distance
-        bounds"): returns ``(acts, bound)``."""
-        _, rho, r, D = geometry
-        if self.combine == "max":
-            x = dr.sqrt(dr.maximum(1.0 - dr.cbrt(dr.minimum(u / dr.maximum(e, 1e-30), 1.0)), 0.0))
-            acts = e >= u
-        else:
-            x, acts = 1.0, e > 0.0
-        bound = rho - x * dr.gather(mi.Float, self._reach_R, k)  # with D_max
-        if self.noise:
-            # With the noise at p: within r/2 of p, |grad D| <= K (sigma_s + 2 (c + R) / r)
-            # (+ K kappa s for a footprint's fade, module docstring).
-            spin = dr.gather(mi.Float, self._seg, k) + 2.0 * (dr.gather(mi.Float, self._core, k)
-                                                             + dr.gather(mi.Float, self._R, k)) \
-                * dr.rcp(dr.maximum(r, 1e-12))
-            if rate is not None:
-                spin = spin + self._lod.kappa * rate
-            lip_D = dr.gather(mi.Float, self._noise_K, k) * spin
-            local = dr.minimum(0.5 * r, (rho - x * D) * dr.rcp(1.0 + x * lip_D))
-            bound = dr.maximum(bound, local)
-        return acts, bound
-
     def field(self, p):
         """Combined field ``F(p)`` (before the threshold) as ``mi.Float``."""
         return self._accumulate(p, (self._start, self._count, self._index))[0]
 
     def _accumulate(self, p, lists, us=(), footprint=None, radii=()):
         """``(F(p), ds, slopes)``: the field over the cell lists ``lists`` (CSR ``start,
-        count, index``); for each ``u`` of ``us``, the smallest :meth:`_level_bound` over
+        count, index``); for each ``u`` of ``us``, the smallest :func:`.skeletal_bounds.level_bound` over
         them (``FAR`` where none acts) or, for a carving set (no positive energy), the
-        largest :meth:`_core_bound`; for each radius of ``radii``, the local slope
-        bound of :meth:`_local_slope` summed over the listed primitives (one member
+        largest :func:`.skeletal_bounds.core_bound`; for each radius of ``radii``, the local slope
+        bound of :func:`.skeletal_bounds.local_slope` summed over the listed primitives (one member
         per curve: their maximum). Primitives listed but not touching ``p`` add
         exactly 0, so the near lists give the same ``F`` as the cell lists. With a
         ``footprint``, the footprint field (star noise truncated)."""
@@ -490,11 +431,11 @@ class SkeletalSet(Node):
             out = []
             for u, d in zip(us, ds):
                 if carving:
-                    out.append(dr.maximum(d, self._core_bound(k, e, geometry, u)))
+                    out.append(dr.maximum(d, core_bound(self, k, e, geometry, u)))
                     continue
-                acts, bound = self._level_bound(k, e, geometry, u, rate)
+                acts, bound = level_bound(self, k, e, geometry, u, rate)
                 out.append(dr.select(acts, dr.minimum(d, bound), d))
-            slopes = tuple(self._local_slope(k, e, geometry, rad, rate) for rad in radii)
+            slopes = tuple(local_slope(self, k, e, geometry, rad, rate) for rad in radii)
             return e, geometry[0], tuple(out), slopes
 
         carving = self.value_max <= 0
@@ -535,27 +476,6 @@ class SkeletalSet(Node):
         n_r = len(radii)
         tot, cur = rest[n_u:n_u + n_r], rest[n_u + n_r:]
         return acc + cur_e * best, rest[:n_u], [t + c for t, c in zip(tot, cur)]
-
-    def _core_bound(self, k, e, geometry, u):
-        """Carving sets (every ``e <= 0``): a lower bound of the distance from ``p`` to
-        ``{F >= u}`` (``u < 0``) from primitive ``k`` alone (module docstring, "Cores"):
-        ``x D_min - rho`` with ``x = sqrt(1 - (u / e)^(1/3))``, 0 where ``|e| <= |u|``."""
-        _, rho, _, _ = geometry
-        x = dr.sqrt(dr.maximum(1.0 - dr.cbrt(dr.minimum(u * dr.rcp(dr.minimum(e, -1e-30)), 1.0)), 0.0))
-        return dr.maximum(x * dr.gather(mi.Float, self._Dmin, k) - rho, 0.0)
-
-    def _local_slope(self, k, e, geometry, radius, rate=None):
-        """Bound of ``|grad F_k|`` in the ball of radius ``radius`` around ``p``
-        (module docstring, "Local slopes"): ``|e| max |g'| L_k`` over the star
-        distances the ball can hold."""
-        _, rho, _, D = geometry
-        Ld = dr.gather(mi.Float, self._Ld, k)
-        if rate is not None:
-            Ld = Ld * (1.0 + self.lod_kappa * rate)
-        # d~ at p (D is exact where the noise was evaluated; D_max elsewhere, where
-        # rho >= D_max and the clamp to 1 makes it exact too).
-        x = dr.minimum(rho * dr.rcp(dr.maximum(D, 1e-30)), 1.0)
-        return dr.abs(e) * falloff_slope_max(x - radius * Ld, x + radius * Ld) * Ld
 
     def eval(self, p):
         return self.field(p) - self._threshold
