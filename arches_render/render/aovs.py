@@ -14,18 +14,12 @@ layer            channels                  value (0 where the ray escapes)
 ``depth``        Z                         distance from the camera centre to the hit, metres
 ``position``     X, Y, Z                   world position of the hit, metres
 ``coverage``     field, mesh               1 where the hit is on the field / on a mesh
-``steps``        N                         steps of the field tracer along the camera ray
-                                           (sphere steps and mipmap cells; also on misses:
-                                           a ray that proved its way free has steps too)
+``steps``        N                         iterations of the field tracer along the camera
+                                           ray (sphere steps; a heightfield cast's cells, or
+                                           a hybrid cast's sphere steps and rounds); misses
+                                           have steps too: proving a way free takes them
 ``layers``       one per material layer    composite weight ``w_i`` of each layer of the
                                            field's triplanar material (sums to 1 on the field)
-``exhausted``    primary, bounce, shadow   rays of the pixel's paths (per sample) that used up
-                                           the field tracer's first step budget and took its
-                                           second (:mod:`arches_render.render.sphere_tracer`);
-                                           with a traced field only
-``unresolved``   primary, bounce, shadow   rays that used up the second budget too, resolved
-                                           conservatively (a hit at the last point, a shadow
-                                           ray occluded): a bug to find, never a silent miss
 ``transmittance`` R, G, B                  with an ``[atmosphere]``: transmittance ``Tr`` of
                                            the camera ray up to its hit (misses: up to where
                                            it leaves the scene box), 1 without fog
@@ -33,6 +27,13 @@ layer            channels                  value (0 where the ray escapes)
                                            same paths (no in-scatter, no extinction), for
                                            compositing; the same estimator as a render
                                            without ``[atmosphere]``, not the same bits
+``exhausted``    primary, bounce, shadow   rays of the pixel's paths (per sample) that used up
+                                           the field tracer's first step budget and took its
+                                           second (:mod:`arches_render.render.sphere_tracer`);
+                                           with a traced field only
+``unresolved``   primary, bounce, shadow   rays that used up the second budget too, resolved
+                                           conservatively (a hit at the last point, a shadow
+                                           ray occluded): a bug to find, never a silent miss
 ===============  ========================  ================================================
 
 With an atmosphere a compositor can rebuild the fogged image from layers:

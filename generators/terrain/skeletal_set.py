@@ -496,10 +496,10 @@ class SkeletalSet(Node):
         (at most :attr:`local_radius`), a bound of ``|grad f|`` in the
         ball of that radius around ``p`` (module docstring, "Local slopes"), from the
         same loop over the primitives."""
-        # Local Hart bound: min(r, (-f - c) / L_local) (the ball of radius r has slope
-        # <= L_local). Levels below the threshold ({F >= u}, u > 0) add the geometric
-        # bounds of the module docstring ("Distance bounds"), from the same loop that
-        # evaluates F (over the near lists).
+        # Local Hart bounds: min(r, (-f - c) / L) where the ball of radius r has slope
+        # <= L (the cell tables, and each radius of radii). Levels below the threshold
+        # ({F >= u}, u > 0) add the geometric bounds of .skeletal_bounds, and carving
+        # sets their cores, from the same loop that evaluates F.
         if not self.noise:
             footprint = None
         carving = self.value_max <= 0
@@ -515,7 +515,8 @@ class SkeletalSet(Node):
             f = self._accumulate(p, (self._start, self._count, self._index), (), footprint)[0] - self._threshold
         else:
             f = self.eval(p)
-        L, _, r = self.local_lipschitz(p)
+        cell, inside = self._cell(p)
+        L, r = dr.gather(mi.Float, self._cell_L, cell), self._cell_edge  # (local_lipschitz)
         L_glob = self.lipschitz
         if footprint is not None:
             grow = 1.0 + self.lod_kappa * footprint.rate
@@ -523,7 +524,6 @@ class SkeletalSet(Node):
         if radii:
             # Outside the grid no primitive is listed: 0 where the supports' box is
             # out of reach, else the global bound.
-            _, inside = self._cell(p)
             outside = box_distance(p, self._glo_box[0], self._glo_box[1])
             slopes = [dr.select(inside, dr.minimum(s_, L_glob), dr.select(outside > rad, 0.0, L_glob))
                       for s_, rad in zip(slopes, radii)]
@@ -535,10 +535,10 @@ class SkeletalSet(Node):
             for s_, rad in zip(slopes, radii):
                 ds[-1] = dr.maximum(ds[-1], dr.minimum(dr.maximum(-f - c, 0.0) * dr.rcp(dr.maximum(s_, 1e-12)), rad))
         if us and carving:
-            # Cores (module docstring): where some primitive alone is below u.
+            # Cores (.skeletal_bounds): where some primitive alone is below u; no
+            # positive energy, so {F >= u} is empty for every u > 0.
             ds = [dr.select(u > 0.0, FAR, dr.select(u < 0.0, dr.maximum(d, g), d)) for d, g, u in zip(ds, geo, us)]
         elif us:
-            cell, inside = self._cell(p)
             empty = dr.gather(mi.Float, self._empty, cell)
             outside = box_distance(p, self._support_lo, self._support_hi)
             # A primitive left out of the near list is at least one cell edge away.
@@ -546,9 +546,6 @@ class SkeletalSet(Node):
                              outside) for g in geo]
             ds = [dr.select(u > self._peak, FAR, dr.select(u > 0.0, dr.maximum(d, g), d))
                   for d, g, u in zip(ds, geo, us)]
-        elif levels and self.value_max <= 0:
-            # No positive energy: {F >= u} is empty for every u > 0.
-            ds = [dr.select(self._threshold - c > 0.0, FAR, d) for d, c in zip(ds, levels)]
         return f, tuple(ds), tuple(slopes)
 
     def __repr__(self):
