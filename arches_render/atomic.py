@@ -17,6 +17,10 @@ the folder as clean as an uninterrupted run.
 Failures to write (a read-only folder, a full disk, a missing folder) raise
 :class:`OutputError`, an ``OSError`` whose message is one line naming the file;
 the CLI prints it and exits with status 1.
+
+The fault tests kill a writer at two test-only points of :func:`_publish`
+(:mod:`arches_render.faults`): its temporary file cut short, and complete but not
+yet renamed.
 """
 
 from __future__ import annotations
@@ -30,6 +34,8 @@ import socket
 import tempfile
 from pathlib import Path
 from typing import IO, Iterator
+
+from . import faults
 
 __all__ = ["OutputError", "atomic_write", "atomic_path", "temp_dir", "sweep_stale"]
 
@@ -286,6 +292,9 @@ def temp_dir(folder, stem: str) -> Iterator[Path]:
 
 
 def _publish(tmp: str, path: Path) -> None:
+    # Test-only kill points (arches_render.faults): a cut-short and a complete temporary file.
+    faults.point("atomic.written", tmp)
+    faults.point("atomic.before_replace", tmp)
     with contextlib.suppress(OSError):
         os.chmod(tmp, 0o666 & ~_UMASK)
     os.replace(tmp, path)

@@ -44,6 +44,7 @@ from pathlib import Path
 
 import platformdirs
 
+from . import faults
 from .atomic import atomic_path
 
 try:  # POSIX; elsewhere concurrent builders both build (still one entry, by the atomic rename)
@@ -172,6 +173,7 @@ def _locked(path: Path):
         return
     try:
         fcntl.flock(fd, fcntl.LOCK_EX)
+        faults.point("cache.locked")  # test-only kill point (arches_render.faults)
         yield
     finally:
         os.close(fd)  # closing drops the lock

@@ -1,15 +1,20 @@
-"""SIGKILL at random moments, and a Dask worker lost mid-turntable (issue 17, "Faults").
+"""SIGKILL at the moments that matter, and a Dask worker lost mid-turntable (issues 17 and 23, "Faults").
 
 For each of ``render``, ``turntable``, ``amplify``, ``rocks``, ``blocks`` and
-``layers``: a subprocess is killed (SIGKILL: no handler runs) after a random delay,
-several times. After every kill the output folder holds only complete outputs
-(the same bytes as an uninterrupted run) and temporary files of the dead process,
-and the cache holds only sealed, valid entries. A rerun then completes, leaves the
-folder exactly as an uninterrupted run does and writes the same bits.
+``layers``: an uninterrupted run in this process records the kill points it passes
+(:mod:`arches_render.faults`: every atomic publish, every cache build, every
+turntable frame). A chain of subprocesses then dies by SIGKILL at those points, each
+run starting from what the previous ones left: holding a cache entry's build lock,
+with its first output cut to half its bytes, with its last output complete but not
+renamed, between two turntable frames. After every kill the output folder holds only
+complete outputs (the same bytes as the uninterrupted run) and temporary files of
+the dead processes, and the cache holds only sealed, valid entries. A rerun then
+completes, keeps what the killed runs finished (turntable frames are not rendered
+again), leaves the output folder and the cache exactly as an uninterrupted run does
+and writes the same bits.
 
-Kills per command: ``$ARCHES_FAULT_KILLS`` (default 2, which keeps the file near a
-minute on two idle cores); ``ARCHES_FAULT_KILLS=20 pytest tests/test_robust_faults.py``
-for a thorough run. The delays come from ``$ARCHES_FAULT_SEED`` (default 17).
+Killing after random delays (the earlier form of this test) mostly landed in the
+start-up of the subprocess and cost a whole run per kill that came too late.
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ import sys
 import textwrap
 import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -30,9 +36,6 @@ import pytest
 from arches_render import atomic, cache
 from helpers import REPO, variant
 from robust_helpers import BASE_SCENE, cli, listing, write
-
-KILLS = int(os.environ.get("ARCHES_FAULT_KILLS", "2"))
-SEED = int(os.environ.get("ARCHES_FAULT_SEED", "17"))
 
 ROCKS = """
 [camera]
@@ -113,7 +116,7 @@ def _files(folder: Path) -> dict:
     return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
 
 
-_TEMP = re.compile(r"^\..*\.tmp-(?P<host>[A-Za-z0-9_]+)-(?P<pid>[0-9]+)-")
+_TEMP = re.compile(r"(?:^|/)\.[^/]*\.tmp-(?P<host>[A-Za-z0-9_]+)-(?P<pid>[0-9]+)-")
 
 
 def _check_after_kill(out: Path, ref: dict, dead: set, cache_dir: Path):
@@ -138,56 +141,135 @@ def _check_after_kill(out: Path, ref: dict, dead: set, cache_dir: Path):
             assert cache._unseal(entry)[1] is None, f"corrupt cache entry {entry}"
 
 
-@pytest.mark.parametrize("command", ["render", "turntable", "amplify", "rocks", "blocks", "layers"])
-def test_sigkill_at_random_moments_leaves_nothing_partial_and_a_rerun_gives_the_same_bits(
-        tmp_path, capsys, monkeypatch, command):
+def _trace(monkeypatch) -> list:
+    """Record the kill points this process passes: ``(point, bytes of the temporary file or None)``."""
+    from arches_render import faults
+    trace = []
+    monkeypatch.setattr(faults, "point", lambda name, path=None: trace.append(
+        (name, os.path.getsize(path) if path is not None else None)))
+    return trace
+
+
+def _kill_plan(trace: list) -> list:
+    """The chain of kill points (``$ARCHES_TEST_KILL_AT`` values) for a command that passed ``trace``.
+
+    Each run of the chain starts from what the runs before it left: a frame finished
+    before the kill (nothing rendered twice after it), then a build lock held (nothing
+    published) or else the first publish cut to half its bytes (nothing published),
+    then the last publish complete but not renamed, counted from where the chain
+    stands. A command that builds a cache entry publishes that entry first, inside the
+    build lock: the lock kill stands for the cut there (the cut itself is the atomic
+    writer's, which the other commands' first publishes exercise).
+    """
+    names = [name for name, _ in trace]
+    sizes = [size for name, size in trace if name == "atomic.written"]
+    plan, done = [], 0
+    if "turntable.after_frame" in names:
+        plan.append("turntable.after_frame:1")
+        done = names[:names.index("turntable.after_frame")].count("atomic.before_replace")
+    plan.append("cache.locked:1" if "cache.locked" in names else f"atomic.written:{sizes[done] // 2}")
+    plan.append(f"atomic.before_replace:{len(sizes) - done}")
+    return plan
+
+
+def _temporaries(folder: Path, pid: int) -> list:
+    """Sizes of the temporary files (also inside temporary folders) of process ``pid`` below ``folder``."""
+    return [p.stat().st_size for p in folder.rglob("*") if p.is_file()
+            and any((m := _TEMP.match(part)) and int(m["pid"]) == pid for part in p.relative_to(folder).parts)]
+
+
+def _killed_at(spec: str, cmd: list, env=None) -> int:
+    """Run ``cmd`` with the kill point ``spec``; assert that it died there; return its pid."""
+    from arches_render import faults
+    p = subprocess.Popen(cmd, cwd=REPO, env=dict(env or os.environ, **{faults.ENV: spec}),
+                         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    _, err = p.communicate(timeout=300)
+    assert p.returncode == -signal.SIGKILL, f"{spec}: not killed there (exit {p.returncode}): {err}"
+    return p.pid
+
+
+def _stamps(paths) -> dict:
+    return {p: (p.stat().st_ino, p.stat().st_mtime_ns) for p in paths}
+
+
+COMMANDS = ("render", "turntable", "amplify", "rocks", "blocks", "layers")
+
+
+def _finished(command: str, folder: Path) -> dict:
+    """Stamps (:func:`_stamps`) of what a rerun must use as it is: sealed cache entries, finished frames."""
+    entries = [e for e in (folder / "cache").rglob("*.npz") if not e.name.startswith(".")]
+    frames = [f for f in (folder / "out").rglob("*.exr") if not _TEMP.search(str(f))] if command == "turntable" else []
+    return _stamps(entries + frames)
+
+
+def _kill_chain(command: str, argv, folder: Path, ref: dict, trace: list) -> dict:
+    """Kill ``command`` at every point of its :func:`_kill_plan`, one subprocess after the other, writing
+    into ``folder/out`` with the cache ``folder/cache``; check what each kill left. Returns
+    :func:`_finished` after the last kill."""
+    out, fault_cache = folder / "out", folder / "cache"
+    env = dict(os.environ, **{cache.ENV: str(fault_cache)}, PYTHONUNBUFFERED="1")
+    cmd = [sys.executable, "-m", "arches_render.cli", *map(str, argv(out))]
+    sizes = [size for name, size in trace if name == "atomic.written"]
+    dead, kept = set(), {}
+    for spec in _kill_plan(trace):
+        pid = _killed_at(spec, cmd, env)
+        dead.add(pid)
+        _check_after_kill(out, ref, dead, fault_cache)
+        assert _stamps(kept) == kept, f"{command} {spec}: a finished frame or a sealed cache entry was made again"
+        kept = _finished(command, folder)
+        point, _, n = spec.partition(":")
+        left = _temporaries(out, pid) + _temporaries(fault_cache, pid)
+        if point == "atomic.written":  # the cut-short file is there, and hidden
+            assert int(n) in left, (command, spec, left)
+        elif point == "atomic.before_replace":  # so is the last output, complete, not renamed
+            assert sizes[-1] in left, (command, spec, left)
+        elif point == "turntable.after_frame":  # one finished frame, published
+            assert len([f for f in _files(out) if f.endswith(".exr") and not _TEMP.search(f)]) == 1, command
+    return kept
+
+
+def test_sigkill_at_every_kind_of_kill_point_leaves_nothing_partial_and_a_rerun_gives_the_same_bits(
+        tmp_path, capsys, monkeypatch):
     variant()
+    from arches_render import faults
     from arches_render.generators.rocks import tile_cache
     from arches_render.render.jobs import clear_cache
-    argv = _inputs(tmp_path)[command]
-    rng = np.random.default_rng([SEED, sum(map(ord, command))])
+    inputs = _inputs(tmp_path)
 
-    # The uninterrupted run (in this process: same code, same bits as a subprocess).
-    monkeypatch.setenv("ARCHES_RENDER_CACHE", str(tmp_path / "cache_ref"))
-    (tmp_path / "ref").mkdir()
-    rc, err = cli(capsys, *argv(tmp_path / "ref"))
-    assert rc == 0, err
-    ref = _files(tmp_path / "ref")
-    assert ref
+    # The uninterrupted runs (in this process: same code, same bits as a subprocess), tracing the kill points.
+    refs = {}
+    for command in COMMANDS:
+        folder = tmp_path / command
+        (folder / "ref").mkdir(parents=True)
+        (folder / "out").mkdir()
+        monkeypatch.setenv(cache.ENV, str(folder / "cache_ref"))
+        with monkeypatch.context() as m:
+            trace = _trace(m)
+            rc, err = cli(capsys, *inputs[command](folder / "ref"))
+        assert rc == 0, (command, err)
+        assert {name for name, _ in trace} <= set(faults.POINTS), trace
+        refs[command] = (_files(folder / "ref"), trace)
+        assert refs[command][0], command
 
-    out, fault_cache = tmp_path / "out", tmp_path / "cache"
-    out.mkdir()
-    env = dict(os.environ, ARCHES_RENDER_CACHE=str(fault_cache), PYTHONUNBUFFERED="1")
-    cmd = [sys.executable, "-m", "arches_render.cli", *map(str, argv(out))]
-    window, killed, finished, dead = 10.0, 0, 0, set()
-    for _ in range(3 * KILLS):
-        if killed >= KILLS:
-            break
-        delay = float(rng.uniform(0.5, window))
-        t0 = time.monotonic()
-        p = subprocess.Popen(cmd, cwd=REPO, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-        try:
-            _, err = p.communicate(timeout=delay)
-            assert p.returncode == 0, err
-            finished += 1
-            window = max(1.0, 0.95 * (time.monotonic() - t0))  # later kills land inside a whole run
-        except subprocess.TimeoutExpired:
-            p.send_signal(signal.SIGKILL)
-            p.communicate()
-            killed += 1
-            dead.add(p.pid)
-        _check_after_kill(out, ref, dead, fault_cache)
-    assert killed >= min(KILLS, 1), f"no kill landed before the command finished ({finished} finished)"
+    # The kill chains, two at a time: a chain's runs follow one another, most of each is a start-up
+    # (imports) on one core.
+    with ThreadPoolExecutor(2) as pool:
+        kept = dict(zip(COMMANDS, pool.map(lambda c: _kill_chain(c, inputs[c], tmp_path / c, *refs[c]), COMMANDS)))
 
-    # The rerun completes, sweeps what the kills left, and writes the same bits.
-    monkeypatch.setenv("ARCHES_RENDER_CACHE", str(fault_cache))
-    tile_cache.clear_memory()
-    clear_cache()
-    rc, err = cli(capsys, *argv(out))
-    assert rc == 0, err
-    assert listing(out) == listing(tmp_path / "ref")
-    assert _files(out) == ref
-    print(f"{command}: {killed} kills, {finished} runs finished before their kill")
+    # The reruns complete, sweep what the kills left, keep what the killed runs finished, and write
+    # the same bits.
+    for command in COMMANDS:
+        folder = tmp_path / command
+        monkeypatch.setenv(cache.ENV, str(folder / "cache"))
+        tile_cache.clear_memory()
+        clear_cache()
+        rc, err = cli(capsys, *inputs[command](folder / "out"))
+        assert rc == 0, (command, err)
+        assert listing(folder / "out") == listing(folder / "ref"), command
+        assert _files(folder / "out") == refs[command][0], command
+        assert listing(folder / "cache") == listing(folder / "cache_ref"), command
+        assert _files(folder / "cache") == _files(folder / "cache_ref"), command
+        assert _stamps(kept[command]) == kept[command], f"{command} rerun: a finished frame or a sealed cache entry was made again"
 
 
 def test_a_dask_worker_killed_during_a_turntable_has_its_frames_rerun(tmp_path):
@@ -228,21 +310,16 @@ def test_a_dask_worker_killed_during_a_turntable_has_its_frames_rerun(tmp_path):
 
 
 def test_kill_leftovers_are_only_hidden_temporaries_named_after_the_dead_process(tmp_path):
-    """The temporary names the kill checks rely on: a writer killed mid-write leaves ``.NAME.tmp-HOST-PID-*``."""
+    """The temporary names the kill checks rely on: a writer killed mid-write leaves ``.NAME.tmp-HOST-PID-*``
+    holding what it had written."""
     code = textwrap.dedent(f"""
-        import os, time
         from arches_render.atomic import atomic_write
         with atomic_write({str(tmp_path / 'x.bin')!r}) as f:
-            f.write(b"half")
-            f.flush()
-            print(os.getpid(), flush=True)
-            time.sleep(600)
+            f.write(b"half and the rest")
     """)
-    p = subprocess.Popen([sys.executable, "-c", code], cwd=REPO, stdout=subprocess.PIPE, text=True)
-    pid = int(p.stdout.readline())
-    p.kill()
-    p.wait(timeout=60)
+    pid = _killed_at("atomic.written:4", [sys.executable, "-c", code])
     (left,) = [q.name for q in tmp_path.iterdir()]
     m = _TEMP.match(left)
     assert m and int(m["pid"]) == pid and m["host"] == atomic._HOST and left.endswith(".bin")
+    assert (tmp_path / left).read_bytes() == b"half"
     assert atomic.sweep_stale(tmp_path) == [left] and not list(tmp_path.iterdir())

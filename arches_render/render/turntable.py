@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import faults
 from .aovs import BASE_LAYERS
 from .denoise import denoise as oidn
 from .distributed import map_jobs
@@ -184,11 +185,13 @@ def render_turntable(plan: TurntablePlan, denoise: bool = False, client=None, pr
     if client is None:
         for k in plan.todo:
             written.append(_write_frame(plan, k, run_job(plan.jobs[k], sample_progress), denoise))
+            faults.point("turntable.after_frame")  # test-only kill point (arches_render.faults)
             if progress:
                 progress(len(written), len(plan.todo))
         return written
     for k, result in map_jobs(client, [plan.jobs[k] for k in plan.todo], keys=plan.todo):
         written.append(_write_frame(plan, k, result, denoise))
+        faults.point("turntable.after_frame")
         if progress:
             progress(len(written), len(plan.todo))
     return written
