@@ -94,8 +94,8 @@ def compare(ref, test, thresholds=None):
         ``(H, W, 3)`` linear images, or EXR files (their beauty).
     thresholds : arches_render.imaging.compare.Thresholds, optional
         Limits (default: mean shift 1 %, worst 8x8 window 5 %, mean FLIP 0.05:
-        "the same look" for renders of a few hundred spp; calibrated limits
-        come from :func:`arches_render.imaging.compare.calibrate`).
+        "the same look" for renders of a few hundred spp). Golden tests, which
+        know each pixel's variance, use :mod:`arches_render.imaging.welch`.
 
     Returns
     -------

@@ -5,14 +5,16 @@ Golden-image tests
 A scene test calls the ``golden`` fixture with a renderer::
 
     def test_arch(golden):
-        golden("arch", render, ref_spp=4096, test_spp=32)
+        golden("arch", render, ref_spp=128, test_spp=32)
 
-where ``render(seed, spp)`` returns a linear ``(H, W, 3)`` array. Normally this
-renders once at the stored test spp and compares with ``golden/arch.exr``
+where ``render(seed, spp)`` returns the render's
+:class:`~arches_render.imaging.welch.PixelMoments` (mean, variance, coverage,
+depth: :func:`arches_render.render.renderer.render_moments`). Normally this
+renders once at the stored test spp and tests it against ``golden/arch.exr``
 (see :mod:`arches_render.imaging.golden`); a failure writes
 ``test-reports/arch/index.html``. ``pytest --update-goldens`` renders the
-reference and the calibration renders instead, writes ``golden/arch.exr`` and
-``golden/arch.json``, and then runs the check once.
+reference first, writes ``golden/arch.exr`` and ``golden/arch.json``, and then
+runs the check once.
 
 This file imports no Mitsuba: collection stays fast, and Mitsuba must be
 imported through :func:`arches_render.backend.set_variant` (it picks the
@@ -60,11 +62,10 @@ def golden(update_goldens, golden_dir, report_dir):
     """Check a render against golden ``name`` (or re-create it under ``--update-goldens``).
 
     Returns a callable ``golden(name, render, ref_spp, test_spp, **kwargs)``:
-    ``render(seed, spp) -> (H, W, 3)``; extra keyword arguments go to
-    :func:`~arches_render.imaging.golden.update_golden` (``calib_seeds``,
-    ``meta``, margins) or, for ``seed``, to
-    :func:`~arches_render.imaging.golden.check_golden`. It returns the
-    :class:`~arches_render.imaging.compare.CompareResult` of the check.
+    ``render(seed, spp) -> PixelMoments``; extra keyword arguments go to
+    :func:`~arches_render.imaging.golden.update_golden` (``meta``) or, for
+    ``seed``, to :func:`~arches_render.imaging.golden.check_golden`. It returns
+    the :class:`~arches_render.imaging.welch.WelchResult` of the check.
     """
     def run(name, render, ref_spp, test_spp, *, seed=None, **update_kwargs):
         if update_goldens:

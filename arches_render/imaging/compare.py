@@ -1,23 +1,18 @@
-"""Compare a low-spp test render with a high-spp reference, with thresholds set by the noise floor.
+"""Compare two images by what a person sees: image mean, local windows, FLIP.
+
+This is the comparison of two finished images without their per-pixel
+variances (:func:`arches_render.api.compare`, "do these two renders look the
+same?"), with fixed limits. Golden tests, which have the variances, use the
+two-sample statistics of :mod:`arches_render.imaging.welch` instead.
 
 Three checks, each aimed at one kind of regression:
 
 1. **Global mean shift** (``mean_rel``, 1 %): the relative difference of the
    image mean, computed per RGB channel; the worst channel is reported. Per
    channel rather than on luminance so that a tint (red up, blue down) that
-   leaves the luminance unchanged still fails. The measured shift of a render
-   that is really 1 % too bright is ``1 % + noise``; compared with 1 % as is,
-   it would pass about half the time. So the rule "a shift of 1 % fails" is
-   applied as ``|shift| > mean_rel - mean_guard``, where :func:`calibrate` sets
-   the guard to 4 sigma of the noise of the image mean at the test spp, capped
-   at ``mean_rel / 2`` (the point where passing a good render and failing a
-   1 % shift are equally likely to go wrong). Sigma is estimated from each
-   calibration render's own error image (:func:`mean_noise`), which is far
-   more precise than the spread of a handful of seeds. At the test spp the
-   image mean averages ``H * W * spp`` samples, so the guard is small
-   (0.2-0.5 % at 48 x 48 pixels, 16-64 spp) for any useful golden;
-   :func:`calibrate` warns when the cap is reached (sigma > 0.125 %, i.e. a
-   3 sigma noise of ~0.4 %): then the 1 % rule is no longer reliable.
+   leaves the luminance unchanged still fails. ``mean_guard`` lowers the limit
+   to ``mean_rel - mean_guard`` so that a true shift of ``mean_rel`` plus noise
+   still fails.
 2. **Local window error** (``tile``): for every ``8 x 8`` window, at every
    position (stride 1, so a changed patch at any offset is covered fully by one
    window), ``|mean_test - mean_ref| / (mean_ref + eps)`` on Rec.709
@@ -51,44 +46,21 @@ References
 from __future__ import annotations
 
 import json
-import math
-import warnings
 from dataclasses import asdict, dataclass, field, fields
-from typing import Sequence
 
 import numpy as np
 
 from .preview import encode_srgb
 
-__all__ = [
-    "LUMINANCE_WEIGHTS", "Thresholds", "CompareResult", "CalibrationWarning",
-    "luminance", "window_error", "mean_shift", "flip_error", "compare", "calibrate",
-    "mean_noise", "TILE_MARGIN", "FLIP_MARGIN", "MEAN_GUARD_SIGMAS", "TILE_WARNING",
-]
+__all__ = ["LUMINANCE_WEIGHTS", "Thresholds", "CompareResult", "luminance", "window_error", "mean_shift",
+           "flip_error", "compare"]
 
 LUMINANCE_WEIGHTS = (0.2126, 0.7152, 0.0722)
 """Rec.709 luminance weights of linear R, G, B."""
 
-TILE_MARGIN = 2.0
-"""Calibrated ``tile`` = worst window error of the calibration renders x this."""
-
-FLIP_MARGIN = 1.25
-"""Calibrated ``flip`` = worst FLIP mean of the calibration renders x this."""
-
-MEAN_GUARD_SIGMAS = 4.0
-"""Calibrated ``mean_guard`` = this many standard deviations of the image mean's noise."""
-
-TILE_WARNING = 0.2
-"""Calibration warns when the tile threshold exceeds this (a 25 % patch change may pass)."""
-
-
-class CalibrationWarning(UserWarning):
-    """The test spp is too low for the comparison to be reliable."""
-
-
 @dataclass(kw_only=True)
 class Thresholds:
-    """Pass limits of :func:`compare`, normally produced by :func:`calibrate`.
+    """Pass limits of :func:`compare`.
 
     Attributes
     ----------
@@ -102,15 +74,12 @@ class Thresholds:
         (default 0.01, i.e. 1 %).
     mean_guard : float, optional
         Noise guard band: the mean check fails above ``mean_rel - mean_guard``
-        so that a true shift of ``mean_rel`` fails despite noise (default 0;
-        set by :func:`calibrate`).
+        so that a true shift of ``mean_rel`` fails despite noise (default 0).
     tile_size : int, optional
         Window side in pixels (default 8).
     eps_rel : float, optional
         Window error denominator offset, as a fraction of the reference's mean
         luminance (default 0.01).
-    calibration : dict, optional
-        Noise measurements the thresholds were derived from (informational).
     """
 
     tile: float
@@ -119,7 +88,6 @@ class Thresholds:
     mean_guard: float = 0.0
     tile_size: int = 8
     eps_rel: float = 0.01
-    calibration: dict = field(default_factory=dict)
 
     @property
     def mean_limit(self) -> float:
@@ -291,42 +259,6 @@ def mean_shift(ref, test) -> np.ndarray:
     return (mt - mr) / (np.maximum(mr, 0.0) + eps)
 
 
-def mean_noise(ref, test, block: int = 4) -> np.ndarray:
-    """Standard deviation of the relative image-mean noise, estimated from one render.
-
-    Parameters
-    ----------
-    ref, test : array_like
-        Linear RGB images, ``(H, W, 3)``; ``test`` must be a render that differs
-        from ``ref`` by noise only.
-    block : int, optional
-        Side of the pixel blocks whose error sums are treated as independent
-        (default 4).
-
-    Returns
-    -------
-    numpy.ndarray
-        Per channel, the estimated standard deviation of :func:`mean_shift`.
-
-    Notes
-    -----
-    The image mean's error is the sum of the block error sums ``S_b`` divided
-    by ``N = H * W``; blocks are nearly independent, so
-    ``Var(mean) ~ sum_b S_b**2 / N**2``. Summing over blocks rather than
-    single pixels keeps the estimate right when a reconstruction filter wider
-    than a pixel correlates neighbours. On the 48 x 48 test scene it matched
-    the spread of the mean over 200 seeds within 2 %, with an 8 % scatter
-    between renders.
-    """
-    r, t = _image(ref, "ref"), _image(test, "test")
-    e = t - r
-    h, w = e.shape[:2]
-    sums = np.add.reduceat(np.add.reduceat(e, np.arange(0, h, block), axis=0), np.arange(0, w, block), axis=1)
-    mr = r.mean(axis=(0, 1))
-    eps = max(1e-3 * float(luminance(mr)), 1e-12)
-    return np.sqrt(np.sum(sums ** 2, axis=(0, 1))) / (h * w) / (np.maximum(mr, 0.0) + eps)
-
-
 def flip_error(ref, test) -> tuple[np.ndarray, float]:
     """LDR-FLIP error between the sRGB previews of two linear images.
 
@@ -367,7 +299,7 @@ def compare(ref, test, thresholds: Thresholds) -> CompareResult:
     test : array_like
         Test render, same shape.
     thresholds : Thresholds
-        Limits, usually from :func:`calibrate`.
+        Limits.
 
     Returns
     -------
@@ -422,109 +354,3 @@ def compare(ref, test, thresholds: Thresholds) -> CompareResult:
                          mean_shift_rgb=tuple(float(v) for v in shifts), tile_max=float(tmap[wy, wx]),
                          tile_where=(int(wy), int(wx)), flip_mean=fmean, failures=failures, thresholds=th,
                          tile_map=tmap, flip_map=fmap, nonfinite=nonfinite)
-
-
-def calibrate(ref, renders: Sequence, tile_margin: float = TILE_MARGIN, flip_margin: float = FLIP_MARGIN,
-              mean_rel: float = 0.01, mean_guard_sigmas: float = MEAN_GUARD_SIGMAS, tile_size: int = 8,
-              eps_rel: float = 0.01) -> Thresholds:
-    """Set the thresholds of :func:`compare` from the noise of renders that should pass.
-
-    Parameters
-    ----------
-    ref : array_like
-        The reference, linear RGB ``(H, W, 3)`` (as stored: pass the
-        half-float rounded golden so calibration sees what checks will see).
-    renders : sequence of array_like
-        Renders of the same scene at the test spp with distinct seeds (none
-        equal to the reference's); 4 or more recommended.
-    tile_margin : float, optional
-        Multiplier of the worst window error measured (default 2.0).
-    flip_margin : float, optional
-        Multiplier of the worst FLIP mean measured (default 1.25).
-    mean_rel : float, optional
-        The global mean shift that must fail (default 1 %); only its noise
-        guard ``mean_guard`` is calibrated.
-    mean_guard_sigmas : float, optional
-        Noise guard of the mean check in standard deviations (default 4).
-    tile_size, eps_rel
-        See :class:`Thresholds`.
-
-    Returns
-    -------
-    Thresholds
-        With ``calibration`` holding the per-render measurements.
-
-    Warns
-    -----
-    CalibrationWarning
-        When the guard of the mean check reaches its cap ``mean_rel / 2``
-        (noise sigma of the image mean > 0.125 %, a 3 sigma noise of about
-        0.4 %: the 1 % rule then fails good renders or passes 1 % shifts
-        now and then), when the tile threshold exceeds :data:`TILE_WARNING`
-        (a 25 % change of an 8 x 8 patch could pass), or with fewer than 3
-        renders.
-
-    Notes
-    -----
-    Why these margins (measured on a 48 x 48 diffuse sphere-and-floor scene,
-    200 seeds at 16, 32 and 64 spp against an 8192 spp reference; thresholds
-    from each group of 4 seeds, checked on the other 196 seeds):
-
-    * The worst window error has a heavy upper tail (std/mean 0.16-0.19,
-      largest/median 1.6-1.9): it is a maximum over a few thousand windows
-      whose worst ones sit in the noisiest (shadowed) region. The worst of 4
-      seeds x 1.5 failed 0.26-0.59 % of good renders, x 1.75 0.01-0.08 %, and
-      x **2.0** one of 29,400 (16 spp; none at 32 and 64 spp). At 2.0 the
-      threshold was 0.067-0.135 (16 spp) and 0.032-0.058 (64 spp), well
-      below the 0.25 of a 25 % patch change; the tile warning (threshold
-      > 0.2) says when that stops being true.
-    * The FLIP mean averages all pixels and varies little (std/mean 0.035):
-      x **1.25** failed none of 9,800. It guards against broad perceptual
-      changes rather than small ones.
-    * The image mean's noise sigma was 0.118 / 0.083 / 0.060 % (16 / 32 /
-      64 spp), so the guard is 0.47 / 0.33 / 0.24 %. With 4 sigma the
-      probability to fail a good render and to pass a 1 % shift are both
-      at most ~3e-5 (none of 9,800 either way); a guard of 1.5-3 x the worst
-      shift of 4 seeds instead passed 0.1-3 % of the 1 % shifts, because 4
-      seeds estimate the spread poorly.
-    """
-    r = _image(ref, "reference")
-    if len(renders) == 0:
-        raise ValueError("calibrate needs at least one render")
-    shifts, tiles, flips, variances = [], [], [], []
-    for img in renders:
-        t = _image(img, "render")
-        if t.shape != r.shape:
-            raise ValueError(f"render shape {t.shape} differs from the reference {r.shape}")
-        if not np.all(np.isfinite(t)):
-            raise ValueError("a calibration render has NaN or infinite pixels")
-        shifts.append(float(np.max(np.abs(mean_shift(r, t)))))
-        variances.append(mean_noise(r, t) ** 2)
-        tiles.append(float(np.max(window_error(r, t, tile_size, eps_rel))))
-        flips.append(flip_error(r, t)[1])
-    sigma = float(np.max(np.sqrt(np.mean(variances, axis=0))))
-    # The floors matter only for (nearly) noise-free renderers: they keep the
-    # half-float rounding of the stored reference (<= 0.05 %) from failing.
-    th = Thresholds(tile=max(max(tiles) * tile_margin, 2e-3), flip=max(max(flips) * flip_margin, 1e-4),
-                    mean_rel=mean_rel, mean_guard=min(sigma * mean_guard_sigmas, 0.5 * mean_rel),
-                    tile_size=tile_size, eps_rel=eps_rel)
-    th.calibration = {"renders": len(renders), "tile_margin": tile_margin, "flip_margin": flip_margin,
-                      "mean_guard_sigmas": mean_guard_sigmas, "mean_sigma": sigma,
-                      "mean_shift_abs": shifts, "tile_max": tiles, "flip_mean": flips,
-                      "mean_shift_noise": max(shifts), "tile_noise": max(tiles), "flip_noise": max(flips)}
-    notes = []
-    if sigma * mean_guard_sigmas > 0.5 * mean_rel:
-        notes.append(f"the image mean's noise at this spp is {sigma:.3%} (3 sigma {3 * sigma:.2%}): the "
-                     f"{mean_rel:.0%} mean rule is unreliable (good renders may fail, {mean_rel:.0%} shifts "
-                     f"may pass); raise the test spp or the resolution")
-    if th.tile > TILE_WARNING:
-        notes.append(f"the window threshold is {th.tile:.1%} (> {TILE_WARNING:.0%}): a 25% change of an "
-                     f"{tile_size}x{tile_size} patch may pass; raise the test spp")
-    if len(renders) < 3:
-        notes.append(f"only {len(renders)} calibration render(s): the thresholds may be too tight")
-    th.calibration["warnings"] = notes
-    for note in notes:
-        warnings.warn(note, CalibrationWarning, stacklevel=2)
-    if not math.isfinite(th.tile) or not math.isfinite(th.flip):
-        raise ValueError(f"calibration produced non-finite thresholds: {th}")
-    return th

@@ -130,7 +130,8 @@ def _layer_channels(name: str, spec: LayerSpec, shape: tuple[int, int],
 
 
 def write_exr(path: str | os.PathLike, rgb, header: Mapping[str, object] | None = None,
-              layers: Mapping[str, LayerSpec] | None = None, half: bool = True) -> Path:
+              layers: Mapping[str, LayerSpec] | None = None, half: bool = True,
+              full_precision: Sequence[str] = ()) -> Path:
     """Write a linear RGB image, metadata and optional layers to an OpenEXR file, atomically.
 
     Parameters
@@ -152,6 +153,10 @@ def write_exr(path: str | os.PathLike, rgb, header: Mapping[str, object] | None 
         Store every channel as half float (default) rather than float32. Values
         beyond +-65504 are clipped to it; use ``half=False`` for data such as
         world positions or depth that need more than 11 significant bits.
+    full_precision : sequence of str, optional
+        Layers stored as float32 even when ``half`` is true; ``'rgb'`` names the
+        colour channels (a golden reference keeps its mean in float32, its
+        variances in half).
 
     Returns
     -------
@@ -176,9 +181,13 @@ def write_exr(path: str | os.PathLike, rgb, header: Mapping[str, object] | None 
 
     rgb = _as_image(rgb, "rgb")
     shape = rgb.shape[:2]
-    channels = {c: _pixels(rgb[..., i], half) for i, c in enumerate("RGB")}
+    full = set(full_precision)
+    unknown = full - {"rgb"} - set(layers or {})
+    if unknown:
+        raise ValueError(f"full_precision names layers that are not written: {sorted(unknown)}")
+    channels = {c: _pixels(rgb[..., i], half and "rgb" not in full) for i, c in enumerate("RGB")}
     for name, spec in (layers or {}).items():
-        new = _layer_channels(name, spec, shape, half)
+        new = _layer_channels(name, spec, shape, half and name not in full)
         clash = set(new) & set(channels)
         if clash:
             raise ValueError(f"layer {name!r} repeats channels {sorted(clash)}")

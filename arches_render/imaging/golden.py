@@ -1,24 +1,29 @@
-"""Golden-image tests: make a calibrated reference once, check cheap renders against it.
+"""Golden-image tests: a reference with its variance, made once; a two-sample test per check.
 
 A golden ``NAME`` is two files in the golden folder:
 
 * ``NAME.exr``: the reference, rendered with ``ref_spp`` samples per pixel
-  (seed 0), half float, ZIP-compressed; its header records name, spp, seed,
-  resolution, versions and date;
+  (seed 0): its mean (RGB), the per-sample variance of R, G, B and
+  luminance (layer ``variance``), the fraction of samples that hit a
+  surface (``coverage.hit``), the mean depth (``depth.Z``, float32) and its
+  per-sample variance (``depth_variance.Z``); ZIP-compressed; the header records
+  name, spp, seed, resolution, versions and date;
 * ``NAME.json``: what a check needs besides the pixels: the test spp, the
-  calibration seeds, the thresholds (with the noise measured to set them),
-  reference spp and seed, resolution, versions, date, and a digest of the
-  reference pixels so that an EXR replaced without re-calibration is noticed.
+  reference's spp and seed, resolution, versions, date, and a digest of the
+  stored pixels so that an EXR replaced without the JSON is noticed.
 
-:func:`update_golden` renders the reference and calibrates the thresholds from
-renders at the test spp with the calibration seeds (see
-:func:`arches_render.imaging.compare.calibrate`). :func:`check_golden` renders
-once at the test spp with a seed that took part in neither and compares. The
-renderer is a callable ``render(seed, spp) -> (H, W, 3) array`` supplied by the
-caller, so the workflow serves every scene test and knows nothing of Mitsuba.
+:func:`update_golden` renders the reference; :func:`check_golden` renders once
+at the test spp with another seed, compares with
+:func:`arches_render.imaging.welch.welch_compare` (Welch's statistic per pixel,
+per window and for the image mean; coverage and depth per pixel), and proves
+with :func:`arches_render.imaging.welch.power_check`, on that same render, that
+a 1 % global and a 25 % local brightening would have failed. Because the
+reference's own noise is in the test, it needs only a few times the test's
+samples (:data:`REF_SPP_FACTOR`), not a converged image.
 
-The reference is calibrated against as stored (rounded to half floats), so
-calibration and checks see the same numbers.
+The renderer is a callable ``render(seed, spp) -> PixelMoments`` supplied by
+the caller (:func:`arches_render.render.renderer.render_moments` for scenes), so
+the workflow knows nothing of Mitsuba.
 """
 
 from __future__ import annotations
@@ -28,38 +33,52 @@ import hashlib
 import json
 import os
 import sys
-import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Mapping, Sequence
+from typing import Callable, Mapping
 
 import numpy as np
 
 from .. import __version__
 from ..atomic import atomic_write
-from .compare import CalibrationWarning, CompareResult, Thresholds, calibrate, compare
-from .exr import HALF_MAX, ExrError, read_exr, write_exr
+from .exr import ExrError, read_exr, write_exr
 from .report import check_name, clear_report, write_failure_report
+from .welch import ALPHA, PixelMoments, WelchResult, power_check, welch_compare
 
-__all__ = ["Golden", "GoldenMissingError", "GoldenError", "RenderFn", "update_golden", "check_golden",
-           "load_golden", "golden_paths", "DEFAULT_CHECK_SEED", "REF_SEED", "UPDATE_HINT"]
+__all__ = ["Golden", "GoldenMissingError", "GoldenError", "GoldenWeakError", "RenderFn", "update_golden",
+           "check_golden", "load_golden", "golden_paths", "DEFAULT_CHECK_SEED", "REF_SEED", "REF_SPP_FACTOR",
+           "MIN_TEST_SPP",
+           "UPDATE_HINT"]
 
-RenderFn = Callable[[int, int], np.ndarray]
-"""``render(seed, spp) -> (H, W, 3)`` linear RGB array (numpy, or anything :func:`numpy.asarray` takes)."""
+RenderFn = Callable[[int, int], PixelMoments]
+"""``render(seed, spp) -> PixelMoments``: beauty, second moments, coverage and depth of a render."""
 
 REF_SEED = 0
 """Seed of the reference render."""
 
 DEFAULT_CHECK_SEED = 17
-"""Seed of check renders: unlike the calibration seeds, so a check sees fresh noise."""
+"""Seed of check renders (anything but :data:`REF_SEED`)."""
+
+MIN_TEST_SPP = 16
+"""Fewest test samples per pixel: below this the per-pixel variance estimates have too
+few degrees of freedom for the normal limit of Welch's statistic (at 2 spp a
+correct render failed the per-pixel and depth tests)."""
+
+REF_SPP_FACTOR = 4
+"""The reference has at least this many times the test's samples: its noise then adds
+``1 / REF_SPP_FACTOR`` to the variance of the test statistic (a 12 % wider noise)."""
 
 UPDATE_HINT = "run `pytest --update-goldens` (or `pytest --update-goldens -k <test>`) to (re)create it"
 
-_FORMAT = 1
+_FORMAT = 2
 
 
 class GoldenError(AssertionError):
     """A golden is unusable: inconsistent files, or made for another resolution or spp."""
+
+
+class GoldenWeakError(GoldenError):
+    """The test render has too few samples to prove that a golden catches what it must."""
 
 
 class GoldenMissingError(FileNotFoundError):
@@ -68,36 +87,29 @@ class GoldenMissingError(FileNotFoundError):
 
 @dataclass
 class Golden:
-    """A golden reference with its comparison settings, as stored.
+    """A golden reference as stored.
 
     Attributes
     ----------
     name : str
         Golden name (file stem).
-    ref : numpy.ndarray
-        Reference image, float32 ``(H, W, 3)``, half-float values.
-    thresholds : Thresholds
-        Calibrated limits.
+    ref : PixelMoments
+        The reference's statistics, as stored.
     test_spp, ref_spp, ref_seed : int
-        Samples per pixel of check renders and of the reference; the
-        reference's seed.
-    calib_seeds : tuple of int
-        Seeds of the calibration renders.
+        Samples per pixel of check renders and of the reference; the reference's seed.
     header : dict of str to str
         Metadata stored in the EXR.
     meta : dict
-        Everything else in the JSON file (date, versions, caller metadata).
+        Everything in the JSON file (date, versions, caller metadata).
     exr_path, json_path : pathlib.Path
         The two files.
     """
 
     name: str
-    ref: np.ndarray = field(repr=False)
-    thresholds: Thresholds
+    ref: PixelMoments = field(repr=False)
     test_spp: int
     ref_spp: int
     ref_seed: int
-    calib_seeds: tuple[int, ...]
     header: dict[str, str] = field(default_factory=dict)
     meta: dict = field(default_factory=dict)
     exr_path: Path | None = None
@@ -106,7 +118,8 @@ class Golden:
     @property
     def resolution(self) -> tuple[int, int]:
         """``(width, height)`` of the reference."""
-        return self.ref.shape[1], self.ref.shape[0]
+        h, w = self.ref.shape
+        return w, h
 
 
 def golden_paths(name: str, golden_dir: str | os.PathLike) -> tuple[Path, Path]:
@@ -115,23 +128,39 @@ def golden_paths(name: str, golden_dir: str | os.PathLike) -> tuple[Path, Path]:
     return base.with_name(base.name + ".exr"), base.with_name(base.name + ".json")
 
 
-def _digest(rgb: np.ndarray) -> str:
-    # Hash of the half-float pixels: survives re-compression of the EXR, not a
-    # change of its content.
-    return hashlib.sha256(np.ascontiguousarray(rgb, dtype=np.float16).tobytes()).hexdigest()
+def _stored_arrays(m: PixelMoments) -> dict[str, np.ndarray]:
+    # What the EXR holds, in the precision it holds it: float32 throughout but for
+    # the coverage fraction (a fraction k / n needs no more than 11 bits). Half floats
+    # would not do for the rest: the tests resolve a mean to FLOOR_REL = 1e-4 where
+    # a pixel is noise-free, and a pixel that sees the sun has a sample variance
+    # far beyond half's 65504.
+    half = np.asarray(m.coverage, np.float32).astype(np.float16).astype(np.float32)
+    return {"mean": np.asarray(m.mean, np.float32), "variance": np.asarray(m.sample_variance(), np.float32),
+            "coverage": half, "depth": np.asarray(m.depth, np.float32),
+            "depth_variance": np.asarray(m.depth_sample_variance(), np.float32)}
 
 
-def _as_half(rgb: np.ndarray) -> np.ndarray:
-    # The same rounding write_exr applies, so calibration sees the stored values.
-    return np.clip(rgb, -HALF_MAX, HALF_MAX).astype(np.float16).astype(np.float32)
+def _from_stored(n: int, a: Mapping[str, np.ndarray]) -> PixelMoments:
+    return PixelMoments.from_sample_variance(n, a["mean"], a["variance"], a["coverage"], a["depth"],
+                                             a["depth_variance"])
 
 
-def _call_render(render: RenderFn, seed: int, spp: int, what: str) -> np.ndarray:
-    img = np.asarray(render(int(seed), int(spp)), dtype=np.float32)
-    if img.ndim != 3 or img.shape[2] != 3:
-        raise ValueError(f"render(seed={seed}, spp={spp}) for the {what} returned shape {img.shape}; "
-                         f"expected (H, W, 3)")
-    return img
+def _digest(arrays: Mapping[str, np.ndarray]) -> str:
+    h = hashlib.sha256()
+    for key in sorted(arrays):
+        h.update(key.encode())
+        h.update(np.ascontiguousarray(arrays[key], dtype=np.float32).tobytes())
+    return h.hexdigest()
+
+
+def _call_render(render: RenderFn, seed: int, spp: int, what: str) -> PixelMoments:
+    out = render(int(seed), int(spp))
+    if not isinstance(out, PixelMoments):
+        raise TypeError(f"render(seed={seed}, spp={spp}) for the {what} returned {type(out).__name__}; "
+                        f"expected PixelMoments (arches_render.render.renderer.render_moments)")
+    if out.n != int(spp):
+        raise ValueError(f"render(seed={seed}, spp={spp}) for the {what} says it took {out.n} samples")
+    return out
 
 
 def _versions() -> dict[str, str]:
@@ -145,75 +174,49 @@ def _versions() -> dict[str, str]:
     return out
 
 
-def update_golden(name: str, render: RenderFn, *, ref_spp: int, test_spp: int,
-                  calib_seeds: Sequence[int] = (1, 2, 3, 4), golden_dir: str | os.PathLike,
-                  meta: Mapping[str, object] | None = None, **calibrate_kwargs) -> Golden:
-    """Render and store the reference of golden ``name`` and calibrate its thresholds.
+def update_golden(name: str, render: RenderFn, *, ref_spp: int, test_spp: int, golden_dir: str | os.PathLike,
+                  meta: Mapping[str, object] | None = None) -> Golden:
+    """Render and store the reference of golden ``name``.
 
     Parameters
     ----------
     name : str
         Golden name; the files are ``golden_dir/NAME.exr`` and ``NAME.json``.
     render : callable
-        ``render(seed, spp) -> (H, W, 3)`` linear RGB; must be deterministic for
-        a given seed (use a ``box`` reconstruction filter).
+        ``render(seed, spp) -> PixelMoments``; deterministic for a given seed
+        (use a ``box`` reconstruction filter).
     ref_spp : int
-        Samples per pixel of the reference (seed 0); at least 16x ``test_spp``
-        so that the reference's own noise is small against the test's.
+        Samples per pixel of the reference (seed 0); at least
+        :data:`REF_SPP_FACTOR` times ``test_spp``.
     test_spp : int
-        Samples per pixel of calibration and check renders.
-    calib_seeds : sequence of int, optional
-        Seeds of the calibration renders (default 1, 2, 3, 4); not 0 nor
-        :data:`DEFAULT_CHECK_SEED`.
+        Samples per pixel of check renders, at least :data:`MIN_TEST_SPP`.
     golden_dir : str or os.PathLike
         Folder of the goldens (created if missing).
     meta : mapping, optional
         Caller metadata (scene file, camera, ...) stored in both files.
-    **calibrate_kwargs
-        Passed to :func:`arches_render.imaging.compare.calibrate` (margins).
 
     Returns
     -------
     Golden
         The stored golden.
 
-    Warns
-    -----
-    CalibrationWarning
-        When ``ref_spp < 16 * test_spp``, or as :func:`calibrate` warns.
-
     Notes
     -----
-    Nothing is written until all renders and the calibration succeeded; the
-    EXR and then the JSON are each written atomically. The JSON holds a
-    digest of the reference pixels, so a crash between the two writes is
-    reported by :func:`check_golden` rather than silently mixing versions.
+    Nothing is written until the render succeeded; the EXR and then the JSON
+    are each written atomically. The JSON holds a digest of the stored pixels,
+    so a crash between the two writes is reported by :func:`check_golden`
+    rather than silently mixing versions.
     """
     exr_path, json_path = golden_paths(name, golden_dir)
-    seeds = tuple(int(s) for s in calib_seeds)
-    if ref_spp < 1 or test_spp < 1:
-        raise ValueError(f"spp must be positive, got ref_spp={ref_spp}, test_spp={test_spp}")
-    if not seeds or len(set(seeds)) != len(seeds) or REF_SEED in seeds or DEFAULT_CHECK_SEED in seeds:
-        raise ValueError(f"calib_seeds {seeds} must be distinct and differ from the reference seed {REF_SEED} "
-                         f"and the check seed {DEFAULT_CHECK_SEED}")
-    if ref_spp < 16 * test_spp:
-        warnings.warn(f"golden {name!r}: ref_spp={ref_spp} < 16 x test_spp={test_spp}; the reference's own "
-                      f"noise will loosen the thresholds", CalibrationWarning, stacklevel=2)
-
+    if test_spp < MIN_TEST_SPP or ref_spp < REF_SPP_FACTOR * test_spp:
+        raise ValueError(f"golden {name!r}: need test_spp >= {MIN_TEST_SPP} and ref_spp >= {REF_SPP_FACTOR} x test_spp, got "
+                         f"ref_spp={ref_spp}, test_spp={test_spp}")
     ref = _call_render(render, REF_SEED, ref_spp, "reference")
-    if not np.all(np.isfinite(ref)):
+    if not (np.all(np.isfinite(ref.mean)) and np.all(np.isfinite(ref.m2))):
         raise ValueError(f"golden {name!r}: the reference render has NaN or infinite pixels")
-    ref = _as_half(ref)
-    renders = []
-    for s in seeds:
-        img = _call_render(render, s, test_spp, f"calibration (seed {s})")
-        if img.shape != ref.shape:
-            raise ValueError(f"golden {name!r}: calibration render (seed {s}) is {img.shape}, "
-                             f"the reference {ref.shape}")
-        renders.append(img)
-    thresholds = calibrate(ref, renders, **calibrate_kwargs)
+    arrays = _stored_arrays(ref)
 
-    h, w = ref.shape[:2]
+    h, w = ref.shape
     now = _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat()
     versions = _versions()
     meta = {str(k): v for k, v in (meta or {}).items()}
@@ -222,18 +225,20 @@ def update_golden(name: str, render: RenderFn, *, ref_spp: int, test_spp: int,
               **{f"meta.{k}": v if isinstance(v, str) else json.dumps(v) for k, v in meta.items()}}
     record = {
         "format": _FORMAT, "name": name, "date": now, "resolution": [w, h],
-        "reference": {"file": exr_path.name, "spp": ref_spp, "seed": REF_SEED, "pixels_sha256": _digest(ref)},
-        "test_spp": test_spp, "calib_seeds": list(seeds), "thresholds": thresholds.to_dict(),
-        "versions": versions, "meta": meta,
+        "reference": {"file": exr_path.name, "spp": ref_spp, "seed": REF_SEED, "pixels_sha256": _digest(arrays)},
+        "test_spp": test_spp, "alpha": ALPHA, "versions": versions, "meta": meta,
     }
     exr_path.parent.mkdir(parents=True, exist_ok=True)
-    write_exr(exr_path, ref, header=header)
+    layers = {"variance": (arrays["variance"], ("R", "G", "B", "Y")), "coverage": (arrays["coverage"], ("hit",)),
+              "depth": (arrays["depth"], ("Z",)), "depth_variance": (arrays["depth_variance"], ("Z",))}
+    write_exr(exr_path, arrays["mean"], header=header, layers=layers,
+              full_precision=("rgb", "variance", "depth", "depth_variance"))
     with atomic_write(json_path, "w", encoding="utf-8") as f:
         json.dump(record, f, indent=2, default=str)
         f.write("\n")
-    return Golden(name=name, ref=ref, thresholds=thresholds, test_spp=test_spp, ref_spp=ref_spp,
-                  ref_seed=REF_SEED, calib_seeds=seeds, header={k: str(v) for k, v in header.items()},
-                  meta=record, exr_path=exr_path, json_path=json_path)
+    return Golden(name=name, ref=_from_stored(ref_spp, arrays), test_spp=test_spp, ref_spp=ref_spp,
+                  ref_seed=REF_SEED, header={k: str(v) for k, v in header.items()}, meta=record,
+                  exr_path=exr_path, json_path=json_path)
 
 
 def load_golden(name: str, golden_dir: str | os.PathLike) -> Golden:
@@ -255,7 +260,7 @@ def load_golden(name: str, golden_dir: str | os.PathLike) -> Golden:
     GoldenMissingError
         When either file is missing (the message says how to create them).
     GoldenError
-        When the files are unreadable or do not belong together.
+        When the files are unreadable, of an older format, or do not belong together.
     """
     exr_path, json_path = golden_paths(name, golden_dir)
     missing = [p for p in (exr_path, json_path) if not p.is_file()]
@@ -263,34 +268,39 @@ def load_golden(name: str, golden_dir: str | os.PathLike) -> Golden:
         raise GoldenMissingError(f"golden {name!r} is missing ({', '.join(map(str, missing))}): {UPDATE_HINT}")
     try:
         record = json.loads(json_path.read_text(encoding="utf-8"))
-        thresholds = Thresholds.from_dict(record["thresholds"])
+        if record.get("format") != _FORMAT:
+            raise ValueError(f"format {record.get('format')!r}, this harness reads format {_FORMAT}")
         ref_info = record["reference"]
-        test_spp, calib = int(record["test_spp"]), tuple(int(s) for s in record["calib_seeds"])
+        test_spp, ref_spp = int(record["test_spp"]), int(ref_info["spp"])
     except (ValueError, KeyError, TypeError) as e:
-        raise GoldenError(f"golden {name!r}: cannot read {json_path} ({e!r}); {UPDATE_HINT}") from e
+        raise GoldenError(f"golden {name!r}: cannot use {json_path} ({e}); {UPDATE_HINT}") from e
     try:
         img = read_exr(exr_path)
+        arrays = {"mean": img.rgb, "variance": img.layers["variance"], "coverage": img.layers["coverage"],
+                  "depth": img.layers["depth"], "depth_variance": img.layers["depth_variance"]}
     except ExrError as e:
         raise GoldenError(f"golden {name!r}: {e}; {UPDATE_HINT}") from e
-    if _digest(img.rgb) != ref_info.get("pixels_sha256"):
+    except KeyError as e:
+        raise GoldenError(f"golden {name!r}: {exr_path.name} has no layer {e}; {UPDATE_HINT}") from e
+    if _digest(arrays) != ref_info.get("pixels_sha256"):
         raise GoldenError(f"golden {name!r}: {exr_path.name} does not match the reference recorded in "
-                          f"{json_path.name} (replaced without re-calibration?); {UPDATE_HINT}")
-    return Golden(name=name, ref=img.rgb, thresholds=thresholds, test_spp=test_spp,
-                  ref_spp=int(ref_info["spp"]), ref_seed=int(ref_info.get("seed", REF_SEED)), calib_seeds=calib,
-                  header=img.header, meta=record, exr_path=exr_path, json_path=json_path)
+                          f"{json_path.name} (replaced without its JSON?); {UPDATE_HINT}")
+    return Golden(name=name, ref=_from_stored(ref_spp, arrays), test_spp=test_spp, ref_spp=ref_spp,
+                  ref_seed=int(ref_info.get("seed", REF_SEED)), header=img.header, meta=record,
+                  exr_path=exr_path, json_path=json_path)
 
 
 def check_golden(name: str, render: RenderFn, *, golden_dir: str | os.PathLike,
                  report_dir: str | os.PathLike, seed: int | None = None, ref_spp: int | None = None,
-                 test_spp: int | None = None) -> CompareResult:
-    """Render at the golden's test spp and compare with its reference.
+                 test_spp: int | None = None) -> WelchResult:
+    """Render at the golden's test spp, compare with its reference, and prove the comparison's power.
 
     Parameters
     ----------
     name : str
         Golden name.
     render : callable
-        ``render(seed, spp) -> (H, W, 3)`` linear RGB, as for :func:`update_golden`.
+        ``render(seed, spp) -> PixelMoments``, as for :func:`update_golden`.
     golden_dir : str or os.PathLike
         Folder of the goldens.
     report_dir : str or os.PathLike
@@ -298,15 +308,14 @@ def check_golden(name: str, render: RenderFn, *, golden_dir: str | os.PathLike,
         removes a stale report of that name.
     seed : int, optional
         Seed of the check render (default :data:`DEFAULT_CHECK_SEED`); must
-        differ from the reference and calibration seeds, whose noise the
-        thresholds were fitted to.
+        differ from the reference's, whose noise would otherwise be shared.
     ref_spp, test_spp : int, optional
         What the calling test asks for; when given and different from what the
         golden was made with, the golden is stale and the check fails.
 
     Returns
     -------
-    CompareResult
+    WelchResult
         The passing result.
 
     Raises
@@ -315,15 +324,17 @@ def check_golden(name: str, render: RenderFn, *, golden_dir: str | os.PathLike,
         When the golden does not exist (message: run ``pytest --update-goldens``).
     GoldenError
         (an :class:`AssertionError`) when the golden is stale or inconsistent.
+    GoldenWeakError
+        When the test render could not have caught a 1 % global or a 25 % local
+        brightening (its message names the spp that would).
     AssertionError
-        When the comparison fails; the message names the failed checks and the
+        When the comparison fails; the message names the failed tests and the
         report folder.
     """
     g = load_golden(name, golden_dir)
     seed = DEFAULT_CHECK_SEED if seed is None else int(seed)
-    if seed == g.ref_seed or seed in g.calib_seeds:
-        raise ValueError(f"check seed {seed} was used to make golden {name!r} (reference {g.ref_seed}, "
-                         f"calibration {g.calib_seeds}); pick another")
+    if seed == g.ref_seed:
+        raise ValueError(f"check seed {seed} made the reference of golden {name!r}; pick another")
     stale = [f"{k} {want} (golden has {have})" for k, want, have in
              (("ref_spp", ref_spp, g.ref_spp), ("test_spp", test_spp, g.test_spp))
              if want is not None and int(want) != have]
@@ -334,8 +345,13 @@ def check_golden(name: str, render: RenderFn, *, golden_dir: str | os.PathLike,
     if test.shape != g.ref.shape:
         raise GoldenError(f"golden {name!r}: the render is {test.shape[1]}x{test.shape[0]} pixels, the golden "
                           f"{g.ref.shape[1]}x{g.ref.shape[0]}; if that is intended, {UPDATE_HINT}")
-    result = compare(g.ref, test, g.thresholds)
+    result = welch_compare(g.ref, test)
     if result.passed:
+        weak = power_check(g.ref, test)
+        if weak:
+            raise GoldenWeakError(f"golden {name!r} cannot prove what it must at {g.test_spp} spp:\n"
+                                  + "\n".join(f"  - {w}" for w in weak)
+                                  + f"\nraise its test spp (and {UPDATE_HINT})")
         clear_report(report_dir, name)
         return result
     page = write_failure_report(report_dir, name, g.ref, test, result)

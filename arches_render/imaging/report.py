@@ -3,13 +3,13 @@
 A report is a folder ``<report_dir>/<name>/`` holding
 
 * ``index.html``: verdict, failed checks, numbers against their limits, images;
-* ``test.exr``: the failing render (half float, the numbers checked);
+* ``test.exr``: the failing render (its mean, variance, coverage and depth);
 * ``reference.png`` / ``test.png``: sRGB previews;
-* ``diff.png``: heat map of the per-pixel relative luminance difference;
-* ``windows.png``: heat map of the 8 x 8 window error, scaled so that the
-  threshold is the middle of the colour ramp (anything in the upper half
-  failed), with the worst window outlined;
-* ``flip.png``: the FLIP error map;
+* ``pixels.png``: heat map of the per-pixel Welch ``|z|`` of luminance;
+* ``windows.png``: heat map of the 8 x 8 window ``|z|``, scaled so that the
+  limit is the middle of the colour ramp (anything in the upper half failed),
+  with the worst window outlined;
+* ``geometry.png``: the per-pixel ``|z|`` of coverage and depth, same scaling;
 * ``result.json``: the numbers, for scripts.
 
 The HTML page uses no scripts, fonts or style sheets from elsewhere: it opens
@@ -27,14 +27,14 @@ from pathlib import Path
 import numpy as np
 
 from ..atomic import atomic_write
-from .compare import CompareResult, luminance
 from .exr import write_exr
 from .preview import write_png
+from .welch import WINDOW, PixelMoments, WelchResult
 
 __all__ = ["write_failure_report", "clear_report", "heatmap", "REPORT_FILES", "check_name"]
 
-REPORT_FILES = ("index.html", "result.json", "test.exr", "reference.png", "test.png", "diff.png",
-                "windows.png", "flip.png")
+REPORT_FILES = ("index.html", "result.json", "test.exr", "reference.png", "test.png", "pixels.png",
+                "windows.png", "geometry.png")
 """Names of the files :func:`write_failure_report` writes (and :func:`clear_report` removes)."""
 
 # Black -> dark red -> red -> yellow -> white: monotonic in lightness, so the
@@ -119,35 +119,30 @@ def _row(label: str, value: str, limit: str, failed: bool) -> str:
             f"<td>{html.escape(limit)}</td></tr>")
 
 
-def _page(name: str, ref: np.ndarray, result: CompareResult, diff_vmax: float) -> str:
-    th = result.thresholds
-    s = min(th.tile_size, *ref.shape[:2])
-    h, w = ref.shape[:2]
+def _page(name: str, shape: tuple[int, int], spp: tuple[int, int], result: WelchResult) -> str:
+    lim = result.limits
+    h, w = shape
     scale = max(1, -(-_MIN_DISPLAY_WIDTH // w))
     failures = "".join(f"<li>{html.escape(f)}</li>" for f in result.failures) or "<li>none</li>"
     rows = [
-        _row("global mean shift (worst channel)", f"{result.mean_shift:+.3%}",
-             f"±{th.mean_limit:.3%} ({th.mean_rel:.2%} rule − {th.mean_guard:.3%} noise guard)",
-             abs(result.mean_shift) > th.mean_limit),
-        _row("mean shift R, G, B", ", ".join(f"{v:+.3%}" for v in result.mean_shift_rgb), "", False),
-        _row(f"worst {s}×{s} window error", f"{result.tile_max:.2%} at (y, x) = {result.tile_where}",
-             f"{th.tile:.2%}", result.tile_max > th.tile),
-        _row("mean FLIP (LDR, sRGB)", f"{result.flip_mean:.5f}", f"{th.flip:.5f}", result.flip_mean > th.flip),
-        _row("non-finite test pixels", str(result.nonfinite), "0", result.nonfinite > 0),
+        _row("pixel-channels passing (Mitsuba's rule)", f"{result.pixel_pass:.4%}",
+             f"≥ {lim['pixel_pass']:.2%} at |z| ≤ {lim['pixel_z']:.2f}", result.pixel_pass < lim["pixel_pass"]),
+        _row(f"worst {WINDOW}×{WINDOW} window |z| (luminance)", f"{result.window_z:.2f} at (y, x) = "
+             f"{result.window_where}", f"{lim['window_z']:.2f}", result.window_z > lim["window_z"]),
+        _row("image mean z (R, G, B, Y)", ", ".join(f"{z:+.2f}" for z in result.mean_z), f"±{lim['mean_z']:.2f}",
+             max(abs(z) for z in result.mean_z) > lim["mean_z"]),
+        _row("image mean shift (R, G, B, Y)", ", ".join(f"{v:+.3%}" for v in result.mean_shift), "", False),
+        _row("worst coverage |z|", f"{result.coverage_z:.2f}", f"{lim['geometry_z']:.2f}",
+             result.coverage_z > lim["geometry_z"]),
+        _row("worst depth |z| (covered pixels)", f"{result.depth_z:.2f}", f"{lim['geometry_z']:.2f}",
+             result.depth_z > lim["geometry_z"]),
     ]
-    cal = th.calibration or {}
-    if cal:
-        rows.append(_row("calibration noise (mean σ / worst window / FLIP)",
-                         f"{cal.get('mean_sigma', float('nan')):.3%} / {cal.get('tile_noise', float('nan')):.2%} / "
-                         f"{cal.get('flip_noise', float('nan')):.5f}",
-                         f"{cal.get('renders', '?')} renders", False))
     figures = [
-        ("reference.png", "reference (sRGB preview)"),
-        ("test.png", "test render (sRGB preview)"),
-        ("diff.png", f"|ΔY| / (Y<sub>ref</sub> + ε) per pixel; white = {diff_vmax:.3g}"),
-        ("windows.png", f"{s}×{s} window error; mid-ramp = limit {th.tile:.2%}, white = 2× limit; "
-                        "outlined: worst window"),
-        ("flip.png", "FLIP error per pixel; white = 1"),
+        ("reference.png", f"reference, {spp[0]} spp (sRGB preview)"),
+        ("test.png", f"test render, {spp[1]} spp (sRGB preview)"),
+        ("pixels.png", f"per-pixel |z| of luminance; mid-ramp = {lim['pixel_z']:.2f}"),
+        ("windows.png", f"{WINDOW}×{WINDOW} window |z|; mid-ramp = limit {lim['window_z']:.2f}; outlined: worst"),
+        ("geometry.png", f"coverage and depth |z|; mid-ramp = limit {lim['geometry_z']:.2f}"),
     ]
     figs = "".join(
         f'<figure><img src="{f}" width="{w * scale}" height="{h * scale}" alt="{f}">'
@@ -167,8 +162,9 @@ figure img {{ image-rendering: pixelated; border: 1px solid #999; }}
 figcaption {{ font-size: 0.85em; max-width: {max(w * scale, 200)}px; }}
 </style></head><body>
 <h1><span class="v">{verdict}</span> golden <code>{html.escape(name)}</code></h1>
-<p>{w}×{h} pixels. Test render: <a href="test.exr">test.exr</a> (half float); numbers:
-<a href="result.json">result.json</a>.</p>
+<p>{w}×{h} pixels. Welch's two-sample statistic z = (test − reference) / √(var<sub>test</sub>/n<sub>test</sub>
++ var<sub>ref</sub>/n<sub>ref</sub>); limits are Šidák-corrected (family-wise α = {lim['alpha']:g}).
+Test render: <a href="test.exr">test.exr</a> (mean and variance); numbers: <a href="result.json">result.json</a>.</p>
 <h2>Failed checks</h2><ul>{failures}</ul>
 <h2>Numbers</h2>
 <table><tr><th>check</th><th>measured</th><th>limit</th></tr>{''.join(rows)}</table>
@@ -177,7 +173,8 @@ figcaption {{ font-size: 0.85em; max-width: {max(w * scale, 200)}px; }}
 """
 
 
-def write_failure_report(folder: str | os.PathLike, name: str, ref, test, result: CompareResult) -> Path:
+def write_failure_report(folder: str | os.PathLike, name: str, ref: PixelMoments, test: PixelMoments,
+                         result: WelchResult) -> Path:
     """Write the report of a golden check into ``folder/name/``.
 
     Parameters
@@ -186,10 +183,10 @@ def write_failure_report(folder: str | os.PathLike, name: str, ref, test, result
         The report root (created if missing), e.g. ``test-reports/``.
     name : str
         Name of the golden; becomes the sub-folder name.
-    ref, test : array_like
-        The reference and the test render, linear RGB ``(H, W, 3)``.
-    result : CompareResult
-        Outcome of :func:`arches_render.imaging.compare.compare` for them.
+    ref, test : PixelMoments
+        The reference and the test render.
+    result : WelchResult
+        Outcome of :func:`arches_render.imaging.welch.welch_compare` for them.
 
     Returns
     -------
@@ -204,32 +201,27 @@ def write_failure_report(folder: str | os.PathLike, name: str, ref, test, result
     """
     out = Path(folder) / check_name(name)
     out.mkdir(parents=True, exist_ok=True)
-    r = np.asarray(ref, dtype=np.float32)
-    t = np.nan_to_num(np.asarray(test, dtype=np.float32), nan=0.0, posinf=0.0, neginf=0.0)
-    th = result.thresholds
-    s = min(th.tile_size, *r.shape[:2])
-
-    write_exr(out / "test.exr", np.asarray(test, dtype=np.float32),
-              header={"golden": name, "role": "failed test render"})
-    write_png(out / "reference.png", r)
-    write_png(out / "test.png", t)
-
-    yr, yt = luminance(r), luminance(t)
-    rel = np.abs(yt - yr) / (np.maximum(yr, 0.0) + th.eps_rel * max(float(yr.mean()), 1e-12))
-    # Per-pixel differences of a low-spp render are mostly noise; scaling to a
-    # high percentile keeps one firefly from turning the rest of the map black.
-    diff_vmax = max(float(np.percentile(rel, 99.5)), 1e-6)
-    wy, wx = result.tile_where
-    write_png(out / "diff.png", _outline(heatmap(rel, diff_vmax), wy, wx, s))
-    windows = _window_canvas(result.tile_map, r.shape[:2], s)
-    write_png(out / "windows.png", _outline(heatmap(windows, 2.0 * th.tile), wy, wx, s))
-    write_png(out / "flip.png", heatmap(result.flip_map, 1.0))
+    lim = result.limits
+    s = min(WINDOW, *ref.shape)
+    write_exr(out / "test.exr", np.asarray(test.mean, np.float32),
+              header={"golden": name, "role": "failed test render", "spp": test.n},
+              layers={"variance": (test.sample_variance(), ("R", "G", "B", "Y")),
+                      "coverage": (test.coverage, ("hit",)), "depth": (test.depth, ("Z",))},
+              full_precision=("rgb", "depth"))
+    write_png(out / "reference.png", np.asarray(ref.mean, np.float32))
+    write_png(out / "test.png", np.nan_to_num(np.asarray(test.mean, np.float32), nan=0.0, posinf=0.0, neginf=0.0))
+    wy, wx = result.window_where
+    write_png(out / "pixels.png", heatmap(result.z_map, 2.0 * lim["pixel_z"]))
+    windows = _window_canvas(result.window_map, ref.shape, s)
+    write_png(out / "windows.png", _outline(heatmap(windows, 2.0 * lim["window_z"]), wy, wx, s))
+    write_png(out / "geometry.png", heatmap(result.geometry_map, 2.0 * lim["geometry_z"]))
 
     with atomic_write(out / "result.json", "w", encoding="utf-8") as f:
-        json.dump({"name": name, **result.numbers()}, f, indent=2, default=float)
+        json.dump({"name": name, "spp": {"reference": ref.n, "test": test.n}, **result.numbers()}, f, indent=2,
+                  default=float)
     page = out / "index.html"
     with atomic_write(page, "w", encoding="utf-8") as f:
-        f.write(_page(name, r, result, diff_vmax))
+        f.write(_page(name, ref.shape, (ref.n, test.n), result))
     return page
 
 

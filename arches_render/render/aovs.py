@@ -34,6 +34,12 @@ layer            channels                  value (0 where the ray escapes)
 ``unresolved``   primary, bounce, shadow   rays that used up the second budget too, resolved
                                            conservatively (a hit at the last point, a shadow
                                            ray occluded): a bug to find, never a silent miss
+``moment2``      R, G, B, Y, Z             with ``moments = true``: the mean of the squared
+                                           samples of the beauty's channels, of its Rec.709
+                                           luminance Y and of the depth; with the beauty and
+                                           the depth layer they give each pixel's sample
+                                           variance ``n / (n - 1) (E[x^2] - E[x]^2)``, which
+                                           the golden tests need (:mod:`arches_render.imaging.welch`)
 ===============  ========================  ================================================
 
 With an atmosphere a compositor can rebuild the fogged image from layers:
@@ -58,7 +64,11 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-__all__ = ["BASE_LAYERS", "RAY_COUNT_KINDS", "ray_count_header", "ATMOSPHERE_LAYERS", "aov_channel_names", "primary_aovs", "split_channels", "layer_names_of"]
+from ..imaging.compare import LUMINANCE_WEIGHTS
+
+__all__ = ["BASE_LAYERS", "MOMENT_CHANNELS", "DEPTH_CHANNEL", "second_moments", "RAY_COUNT_KINDS",
+           "ray_count_header", "ATMOSPHERE_LAYERS", "aov_channel_names", "primary_aovs", "split_channels",
+           "layer_names_of"]
 
 #: Kinds of rays counted in the ``exhausted`` and ``unresolved`` layers (their channels).
 RAY_COUNT_KINDS = ("primary", "bounce", "shadow")
@@ -71,13 +81,28 @@ BASE_LAYERS = (("albedo", ("R", "G", "B")), ("normal", ("X", "Y", "Z")), ("depth
                ("position", ("X", "Y", "Z")), ("coverage", ("field", "mesh")), ("steps", ("N",)))
 
 
+#: Channels of the ``moment2`` layer: squared beauty R, G, B, squared luminance, squared depth.
+MOMENT_CHANNELS = ("R", "G", "B", "Y", "Z")
+
+#: Index of ``depth.Z`` among the AOV channels (after albedo and normal).
+DEPTH_CHANNEL = 6
+
+def second_moments(L, depth) -> list:
+    """Per-sample squares of the beauty ``L`` (R, G, B), its luminance and ``depth``,
+    in the order of :data:`MOMENT_CHANNELS` (the film averages them into ``E[x^2]``)."""
+    wr, wg, wb = LUMINANCE_WEIGHTS
+    y = wr * L.x + wg * L.y + wb * L.z
+    return [dr.square(L.x), dr.square(L.y), dr.square(L.z), dr.square(y), dr.square(depth)]
+
+
 def layer_names_of(bsdf) -> list[str]:
     """Layer names of a triplanar BSDF (``[]`` for other BSDFs or ``None``)."""
     names = getattr(bsdf, "names", None) if bsdf is not None else None
     return list(names) if names and hasattr(bsdf, "layer_weights") else []
 
 
-def aov_channel_names(field_bsdf=None, atmosphere: bool = False, field: bool = False) -> list[str]:
+def aov_channel_names(field_bsdf=None, atmosphere: bool = False, field: bool = False,
+                      moments: bool = False) -> list[str]:
     """Film channel names (``layer.channel``) in the order of :func:`primary_aovs`.
 
     Parameters
@@ -88,6 +113,8 @@ def aov_channel_names(field_bsdf=None, atmosphere: bool = False, field: bool = F
         Whether the render has an atmosphere (adds :data:`ATMOSPHERE_LAYERS`).
     field : bool
         Whether a field is traced (adds the ``exhausted`` and ``unresolved`` ray counts).
+    moments : bool
+        Whether the render returns second moments (adds ``moment2``, last).
 
     Returns
     -------
@@ -99,6 +126,8 @@ def aov_channel_names(field_bsdf=None, atmosphere: bool = False, field: bool = F
         out += [f"{layer}.{c}" for layer, letters in ATMOSPHERE_LAYERS for c in letters]
     if field:
         out += [f"{layer}.{k}" for layer in ("exhausted", "unresolved") for k in RAY_COUNT_KINDS]
+    if moments:
+        out += [f"moment2.{c}" for c in MOMENT_CHANNELS]
     return out
 
 

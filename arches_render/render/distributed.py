@@ -33,6 +33,7 @@ import numpy as np
 
 from ..imaging.golden import update_golden
 from .jobs import RenderJob, run_job
+from .renderer import moments_of
 
 __all__ = ["dask_client", "map_jobs", "tile_grid", "render_tiled", "regenerate_goldens"]
 
@@ -166,13 +167,13 @@ def render_tiled(job: RenderJob, tiles: int, client=None, progress=None):
 
 
 def regenerate_goldens(scenes: Sequence, golden_dir, width: int, height: int, ref_spp: int,
-                       test_spp_of, client=None, calib_seeds=(1, 2, 3, 4)) -> list:
+                       test_spp_of, client=None) -> list:
     """Re-create the golden references of scene files, renders spread over a cluster.
 
-    The reference (seed 0, ``ref_spp``) and the calibration renders (``calib_seeds``
-    at the test spp) of every scene are independent jobs; once gathered,
-    :func:`arches_render.imaging.golden.update_golden` stores them exactly as the
-    serial ``pytest --update-goldens`` would (same seeds, same renderer, no AOVs).
+    Every scene's reference (seed 0, ``ref_spp``, with its second moments) is one
+    job; once gathered, :func:`arches_render.imaging.golden.update_golden` stores
+    it exactly as the serial ``pytest --update-goldens`` would (same seed, same
+    renderer).
 
     Parameters
     ----------
@@ -183,28 +184,16 @@ def regenerate_goldens(scenes: Sequence, golden_dir, width: int, height: int, re
     test_spp_of : callable
         ``test_spp_of(name) -> int``.
     client : dask.distributed.Client, optional
-    calib_seeds : sequence of int
 
     Returns
     -------
     list of Golden
     """
-    jobs, keys = [], []
-    for path in scenes:
-        path = Path(path).resolve()
-        name = path.stem
-        base = RenderJob(scene=str(path), width=width, height=height, spp=ref_spp, aovs=False)
-        jobs.append(base)
-        keys.append((name, 0, ref_spp))
-        for s in calib_seeds:
-            jobs.append(base.with_(seed=int(s), spp=int(test_spp_of(name))))
-            keys.append((name, int(s), int(test_spp_of(name))))
-    results = ({k: run_job(j)[0] for k, j in zip(keys, jobs)} if client is None
-               else {k: r[0] for k, r in map_jobs(client, jobs, keys)})
-    out = []
-    for path in scenes:
-        name = Path(path).stem
-        out.append(update_golden(name, lambda seed, spp, n=name: results[(n, seed, spp)],
-                                 ref_spp=ref_spp, test_spp=int(test_spp_of(name)),
-                                 calib_seeds=calib_seeds, golden_dir=golden_dir))
-    return out
+    jobs = [RenderJob(scene=str(Path(p).resolve()), width=width, height=height, spp=ref_spp, moments=True)
+            for p in scenes]
+    keys = [Path(p).stem for p in scenes]
+    results = ({k: run_job(j) for k, j in zip(keys, jobs)} if client is None
+               else dict(map_jobs(client, jobs, keys)))
+    return [update_golden(name, lambda seed, spp, n=name: moments_of(*results[n], spp), ref_spp=ref_spp,
+                          test_spp=int(test_spp_of(name)), golden_dir=golden_dir)
+            for name in keys]

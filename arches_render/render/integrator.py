@@ -65,7 +65,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..backend import variant_class
-from .aovs import RAY_COUNT_KINDS, aov_channel_names, primary_aovs
+from .aovs import DEPTH_CHANNEL, MOMENT_CHANNELS, RAY_COUNT_KINDS, aov_channel_names, primary_aovs, second_moments
 from .heightfield_caster import make_tracer
 from .sphere_tracer import position_ulps
 
@@ -87,7 +87,9 @@ class _ImplicitPathImpl:
     Properties: ``max_depth`` (default 6, -1 = unbounded), ``rr_depth`` (5),
     ``hide_emitters`` (false), ``eps`` (relative hit tolerance, 2e-4), ``omega``
     (over-relaxation, 1.6), ``max_steps`` (512), ``aovs`` (false: return the AOVs
-    of :mod:`arches_render.render.aovs`), ``heightfield_cast`` (true: ray-cast
+    of :mod:`arches_render.render.aovs`), ``moments`` (false: with ``aovs``, also the
+    per-sample squares of the beauty, its luminance and the depth, layer ``moment2``,
+    from which a render's per-pixel sample variance follows), ``heightfield_cast`` (true: ray-cast
     heightfield trees, :mod:`arches_render.render.heightfield_caster`; false:
     sphere-trace every field, for comparisons), ``lod`` (true: footprint level of
     detail, see the module docstring), ``lod_bounce_spread`` (0.1 rad: the cone
@@ -104,6 +106,7 @@ class _ImplicitPathImpl:
         self.omega = float(props.get("omega", 1.6))
         self.max_steps = int(props.get("max_steps", 512))
         self.aovs = bool(props.get("aovs", False))
+        self.moments = self.aovs and bool(props.get("moments", False))
         self.heightfield_cast = bool(props.get("heightfield_cast", True))
         self.lod = bool(props.get("lod", True))
         self.lod_bounce_spread = float(props.get("lod_bounce_spread", 0.1))
@@ -330,12 +333,17 @@ class _ImplicitPathImpl:
         if atm is not None:
             L_c = state[9][0]
             aovs += [L_c.x, L_c.y, L_c.z]
-        return L, valid_ray, aovs + list(state[12])
+        aovs += list(state[12])
+        if self.moments:
+            aovs += second_moments(L, aovs[DEPTH_CHANNEL])
+        return L, valid_ray, aovs
 
     def primary_aov_count(self):
-        """Channels that :meth:`record_aovs` fills (all but the ray counts and ``beauty_clear``)."""
+        """Channels that :meth:`record_aovs` fills (all but the ray counts, ``beauty_clear``
+        and ``moment2``)."""
         counted = 2 * len(RAY_COUNT_KINDS) if self.tracer is not None else 0
-        return len(self.aov_names()) - counted - (3 if self.atmosphere is not None else 0)
+        later = (3 if self.atmosphere is not None else 0) + (len(MOMENT_CHANNELS) if self.moments else 0)
+        return len(self.aov_names()) - counted - later
 
     @property
     def shades_field(self):
@@ -390,7 +398,7 @@ class _ImplicitPathImpl:
         if not self.aovs:
             return []
         return aov_channel_names(self.field_bsdf if self.tracer else None, self.atmosphere is not None,
-                                 self.tracer is not None)
+                                 self.tracer is not None, self.moments)
 
     def to_string(self):
         return (f"ImplicitPathIntegrator[max_depth={self.max_depth}, rr_depth={self.rr_depth}, "

@@ -53,6 +53,8 @@ class RenderJob:
         ``'field'`` or ``'mesh'``.
     aovs : bool
         Also render the AOV layers.
+    moments : bool
+        Also render the second moments (layer ``moment2``, for golden tests).
     camera : tuple or None
         ``(origin, target, up, fov)`` replacing the scene's camera.
     crop : tuple or None
@@ -75,6 +77,7 @@ class RenderJob:
     stream: int = 0
     geometry: str = "field"
     aovs: bool = True
+    moments: bool = False
     camera: tuple | None = None
     crop: tuple | None = None
     voxel: float = 0.0
@@ -100,7 +103,7 @@ def _scene_for(job: RenderJob):
     with paths.allowed(job.allow):
         desc = load_scene(path)
     scene = build_scene(desc, job.geometry, job.width, job.height, job.voxel or None, aovs=job.aovs,
-                        crop=job.crop)
+                        crop=job.crop, moments=job.moments)
     _CACHE[key] = (desc, scene)
     while len(_CACHE) > _CACHE_SIZE:
         _CACHE.popitem(last=False)
@@ -114,8 +117,8 @@ def prime_cache(job: RenderJob, desc, scene) -> None:
 
 def _key(job: RenderJob) -> tuple:
     path = Path(job.scene).resolve()
-    return (str(path), scene_inputs(path), job.width, job.height, job.geometry, job.aovs, job.crop, job.voxel,
-            job.allow)
+    return (str(path), scene_inputs(path), job.width, job.height, job.geometry, job.aovs, job.moments, job.crop,
+            job.voxel, job.allow)
 
 
 def scene_inputs(path) -> str:

@@ -21,6 +21,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from ..imaging.welch import PixelMoments
 from ..materials.detail import pixel_spread
 from ..mesh.polygonize import polygonize
 from ..scene.material_keys import FIELD_ROOT
@@ -172,7 +173,7 @@ def set_pixel_spread(scene, fov=None, width=None) -> None:
 
 
 def build_scene(desc, geometry=None, width=None, height=None, voxel=None, progress=None,
-                aovs=False, crop=None, bsdfs=None):
+                aovs=False, crop=None, bsdfs=None, moments=False):
     """Assemble the Mitsuba scene of a :class:`SceneDescription`.
 
     Parameters
@@ -195,6 +196,9 @@ def build_scene(desc, geometry=None, width=None, height=None, voxel=None, progre
     bsdfs : dict, optional
         The materials as built by :func:`load_materials` (shared with the caller,
         who may edit them later); default: built here.
+    moments : bool, optional
+        Also render the second moments (layer ``moment2``; implies ``aovs``), for
+        :func:`render_moments`.
 
     Returns
     -------
@@ -202,6 +206,7 @@ def build_scene(desc, geometry=None, width=None, height=None, voxel=None, progre
     """
     ensure_registered()
     s = desc.render
+    aovs = aovs or moments
     geometry = geometry or s.geometry
     d = {"type": "scene",
          "sensor": sensor_dict(desc, width or s.width, height or s.height, crop)}
@@ -222,14 +227,14 @@ def build_scene(desc, geometry=None, width=None, height=None, voxel=None, progre
         d["integrator"] = {"type": "implicit_path" if ours else "path", "max_depth": s.max_depth,
                            "rr_depth": s.rr_depth}
         if aovs:
-            d["integrator"]["aovs"] = True
+            d["integrator"].update(aovs=True, moments=bool(moments))
         if desc.field is not None:
             d["field_mesh"], _ = field_mesh_shape(desc, field_bsdf, voxel, progress)
         scene = mi.load_dict(d)
     else:
         d["integrator"] = {"type": "implicit_path", "max_depth": s.max_depth, "rr_depth": s.rr_depth,
                            "eps": s.eps, "omega": s.omega, "max_steps": s.max_steps,
-                           "aovs": bool(aovs)}
+                           "aovs": bool(aovs), "moments": bool(moments)}
         scene = mi.load_dict(d)
         scene.integrator().attach(desc.field, field_bsdf)
     # Clip planes for the whole scene, meshes included (a far-field ring reaches the
@@ -341,3 +346,31 @@ def render_image(scene, spp: int, seed: int = 0, passes: int = 0, progress=None)
         if progress:
             progress(done, spp)
     return (acc / spp)[..., :3].astype(np.float32)
+
+
+def render_moments(scene, spp: int, seed: int = 0, passes: int = 0, progress=None):
+    """Render the per-pixel sample statistics that the golden tests compare.
+
+    Parameters
+    ----------
+    scene : mi.Scene
+        Built with ``moments=True``.
+    spp, seed, passes, progress
+        As for :func:`render_image`.
+
+    Returns
+    -------
+    arches_render.imaging.welch.PixelMoments
+        Beauty, second moments of R, G, B, luminance and depth, coverage and depth.
+    """
+    return moments_of(*render_layers(scene, spp, seed, passes, progress), spp)
+
+
+def moments_of(rgb, layers: dict, spp: int):
+    """The :class:`~arches_render.imaging.welch.PixelMoments` of a render's beauty and
+    layers (:func:`render_layers` of a scene built with ``moments=True``)."""
+    if "moment2" not in layers:
+        raise ValueError("the render has no moment2 layer: build the scene with moments=True")
+    m2 = layers["moment2"][0]
+    return PixelMoments(n=spp, mean=rgb, m2=m2[..., :4], coverage=layers["coverage"][0].sum(axis=-1),
+                        depth=layers["depth"][0][..., 0], depth_m2=m2[..., 4])

@@ -1,0 +1,515 @@
+"""Two-sample tests of Monte Carlo renders: does a test render converge to its reference?
+
+A render of ``n`` samples per pixel estimates each pixel's expected value ``mu``
+by the sample mean ``m``; with the per-pixel sample variance ``s^2`` (from the
+second moment ``E[x^2]`` the renderer returns beside the mean, layer
+``moment2``), ``Var(m) = s^2 / n``. Two renders of the same scene and code,
+with independent samples, differ only by that noise, so for every pixel and
+channel Welch's statistic
+
+    z = (m_test - m_ref) / sqrt(s_test^2 / n_test + s_ref^2 / n_ref)
+
+is close to standard normal (``n`` is large enough for the normal limit of
+Welch's t; Jung et al. 2020 use it for the same purpose). The reference is a
+render of a few times the test's samples, stored with its variance: it need not
+be converged, since its noise enters the denominator.
+
+Four tests, each aimed at one kind of regression, at family-wise false-alarm
+rate :data:`ALPHA` unless said otherwise:
+
+1. **Pixels** (Mitsuba 3's rule, ``src/render/tests/test_renders.py``): a
+   two-sided p-value per pixel and channel, Sidak-corrected level
+   ``1 - (1 - 0.01)^(1 / N)`` over the ``N`` pixel-channels; the image passes
+   when at least 99.75 % of them pass. Broad changes fail it; a small one is
+   lost in the allowed 0.25 %.
+2. **Windows**: the same statistic on the luminance summed over every ``8 x 8``
+   window, at every position (stride 1, so a changed patch at any offset is
+   one window); Sidak over the windows (conservative: overlapping windows are
+   correlated). Summing 64 pixels cuts the noise of a local change by 8.
+3. **Image mean**: the statistic on the sum over all pixels, per channel R, G,
+   B and luminance Y (Sidak over the four): a 1 % global shift, a tint.
+4. **Geometry** (noise of lighting does not enter): per pixel, the fraction of
+   samples that hit a surface (binomial variance) and, where every sample of
+   both renders hit, the depth; Sidak over the pixels and a *single* failing
+   pixel fails. A void of one pixel or a surface that moved fails here
+   whatever the light does.
+
+Each statistic's variance gets a floor of ``(FLOOR_REL * |m_ref|)^2`` plus a
+tiny absolute term: float32 accumulation in the film and ulp-level differences
+between Dr.Jit back-ends change a noise-free pixel (sky) by about 1e-6 relative,
+which would otherwise be infinitely significant.
+
+A test is only as good as its power. :func:`power_check` injects, into the test
+render itself, a 1 % global brightening and a 25 % brightening of the weakest
+``8 x 8`` window (the one where such a change is least significant) and checks
+that tests 3 and 2 reject them; a golden whose samples cannot prove that is
+reported as too weak, with the spp it would need.
+
+References
+----------
+.. [1] Welch, B. L. "The generalization of 'Student's' problem when several
+   different population variances are involved", Biometrika 34, 1947.
+.. [2] Jung, A., Hanika, J., Dachsbacher, C. "Detecting Bias in Monte Carlo
+   Renderers using Welch's t-test", JCGT 9(2), 2020.
+.. [3] Sidak, Z. "Rectangular confidence regions for the means of multivariate
+   normal distributions", JASA 62, 1967.
+.. [4] Jakob, W. et al. Mitsuba 3, ``src/render/tests/test_renders.py``
+   (per-pixel Z-test, Sidak correction, 99.75 % pass rule).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy.special import ndtri
+
+from .compare import LUMINANCE_WEIGHTS
+
+__all__ = ["PixelMoments", "WelchResult", "ALPHA", "PIXEL_ALPHA", "PIXEL_PASS_FRACTION", "WINDOW",
+           "FLOOR_REL", "SHIFT", "PATCH_CHANGE", "sidak_z", "welch_compare", "power_check"]
+
+ALPHA = 1e-4
+"""Family-wise false-alarm rate of the window, mean and geometry tests (each)."""
+
+PIXEL_ALPHA = 0.01
+"""Family-wise level of the per-pixel test before its pass fraction (Mitsuba's value)."""
+
+PIXEL_PASS_FRACTION = 0.9975
+"""Fraction of pixel-channels that must pass the per-pixel test (Mitsuba's value)."""
+
+WINDOW = 8
+"""Side of the windows of the window test, pixels."""
+
+FLOOR_REL = 1e-4
+"""Relative standard deviation added to every statistic's noise (float precision)."""
+
+SHIFT = 0.01
+"""Global relative brightening that :func:`power_check` must see rejected."""
+
+PATCH_CHANGE = 0.25
+"""Relative brightening of one ``WINDOW`` square that :func:`power_check` must see rejected."""
+
+DARK_WINDOW = 0.25
+"""Windows darker than this fraction of the image's mean luminance are left out of the
+patch power check (the window test itself covers them all). In shadowed rock lit by
+sky light alone the per-sample noise is several times the mean: proving a 25 % change
+there took 150-700 spp on the shipped scenes at 96 x 54, against 30-130 spp for the
+windows at least a quarter as bright as the image."""
+
+_TINY = 1e-12
+
+
+def sidak_z(alpha: float, tests: int) -> float:
+    """Two-sided normal quantile at Sidak's per-test level for ``tests`` tests at family level ``alpha``.
+
+    Parameters
+    ----------
+    alpha : float
+        Family-wise false-alarm rate.
+    tests : int
+        Number of tests.
+
+    Returns
+    -------
+    float
+        ``z`` with ``P(|Z| > z) = 1 - (1 - alpha)^(1 / tests)``.
+    """
+    per = -math.expm1(math.log1p(-alpha) / max(int(tests), 1))
+    return float(-ndtri(per / 2.0))
+
+
+@dataclass
+class PixelMoments:
+    """Per-pixel sample statistics of a render of ``n`` samples per pixel.
+
+    Attributes
+    ----------
+    n : int
+        Samples per pixel.
+    mean : numpy.ndarray
+        Beauty, linear RGB ``(H, W, 3)``: the sample mean.
+    m2 : numpy.ndarray
+        ``(H, W, 4)``: mean of the squared samples of R, G, B and luminance Y.
+    coverage : numpy.ndarray
+        ``(H, W)``: fraction of the samples whose camera ray hit a surface.
+    depth : numpy.ndarray
+        ``(H, W)``: mean depth (misses count 0).
+    depth_m2 : numpy.ndarray
+        ``(H, W)``: mean squared depth.
+    """
+
+    n: int
+    mean: np.ndarray = field(repr=False)
+    m2: np.ndarray = field(repr=False)
+    coverage: np.ndarray = field(repr=False)
+    depth: np.ndarray = field(repr=False)
+    depth_m2: np.ndarray = field(repr=False)
+
+    def __post_init__(self):
+        self.mean = np.asarray(self.mean, np.float64)
+        h, w = self.mean.shape[:2]
+        want = {"mean": (h, w, 3), "m2": (h, w, 4), "coverage": (h, w), "depth": (h, w), "depth_m2": (h, w)}
+        for name, shape in want.items():
+            value = np.asarray(getattr(self, name), np.float64)
+            if value.shape != shape:
+                raise ValueError(f"PixelMoments.{name} has shape {value.shape}, expected {shape}")
+            setattr(self, name, value)
+        if int(self.n) < 2:
+            raise ValueError(f"PixelMoments needs at least 2 samples per pixel for a variance, got {self.n}")
+        self.n = int(self.n)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(H, W)``."""
+        return self.mean.shape[:2]
+
+    @property
+    def mean4(self) -> np.ndarray:
+        """``(H, W, 4)``: the mean of R, G, B and luminance Y."""
+        y = self.mean @ np.asarray(LUMINANCE_WEIGHTS)
+        return np.concatenate([self.mean, y[..., None]], axis=-1)
+
+    @classmethod
+    def from_sample_variance(cls, n: int, mean, variance, coverage, depth, depth_variance) -> "PixelMoments":
+        """Moments from means and unbiased sample variances (as a golden stores them).
+
+        Parameters
+        ----------
+        n : int
+            Samples per pixel.
+        mean : array_like
+            ``(H, W, 3)`` beauty.
+        variance : array_like
+            ``(H, W, 4)`` sample variance ``s^2`` of R, G, B, Y.
+        coverage, depth, depth_variance : array_like
+            ``(H, W)`` each.
+        """
+        mean = np.asarray(mean, np.float64)
+        y = mean @ np.asarray(LUMINANCE_WEIGHTS)
+        mean4 = np.concatenate([mean, y[..., None]], axis=-1)
+        k = (n - 1) / n
+        depth = np.asarray(depth, np.float64)
+        return cls(n=n, mean=mean, m2=np.asarray(variance, np.float64) * k + mean4 ** 2, coverage=coverage,
+                   depth=depth, depth_m2=np.asarray(depth_variance, np.float64) * k + depth ** 2)
+
+    @classmethod
+    def from_batches(cls, images, spp_each: int) -> "PixelMoments":
+        """Moments from independent renders of equal spp (a renderer that returns no
+        second moments, e.g. Mitsuba's stock ``path``): the spread of the batch means
+        times ``spp_each`` estimates the per-sample variance (``len(images) - 1``
+        degrees of freedom). Coverage and depth are unknown: compare with
+        ``geometry=False``.
+
+        Parameters
+        ----------
+        images : sequence of array_like
+            ``(H, W, 3)`` renders with distinct seeds, ``spp_each`` samples each.
+        spp_each : int
+        """
+        rgb = np.stack([np.asarray(i, np.float64) for i in images])
+        if len(rgb) < 2:
+            raise ValueError("from_batches needs at least two renders")
+        y = rgb @ np.asarray(LUMINANCE_WEIGHTS)
+        x4 = np.concatenate([rgb, y[..., None]], axis=-1)
+        n = len(rgb) * int(spp_each)
+        var = x4.var(axis=0, ddof=1) * spp_each
+        h, w = rgb.shape[1:3]
+        zeros = np.zeros((h, w))
+        return cls.from_sample_variance(n, rgb.mean(axis=0), var, np.ones((h, w)), zeros, zeros)
+
+    def sample_variance(self) -> np.ndarray:
+        """``(H, W, 4)``: unbiased per-sample variance ``s^2`` of R, G, B, Y."""
+        m = self.mean4
+        return np.maximum(self.m2 - m * m, 0.0) * (self.n / (self.n - 1))
+
+    def depth_sample_variance(self) -> np.ndarray:
+        """``(H, W)``: unbiased per-sample variance of the depth."""
+        return np.maximum(self.depth_m2 - self.depth ** 2, 0.0) * (self.n / (self.n - 1))
+
+    def mean_variance(self) -> np.ndarray:
+        """``(H, W, 4)``: variance of the pixel means of R, G, B, Y, ``s^2 / n``."""
+        return self.sample_variance() / self.n
+
+    def depth_mean_variance(self) -> np.ndarray:
+        """``(H, W)``: variance of the mean depth."""
+        return self.depth_sample_variance() / self.n
+
+    def coverage_mean_variance(self) -> np.ndarray:
+        """``(H, W)``: binomial variance of the coverage fraction, from ``(k + 1/2) / (n + 1)``
+        so that a pixel whose samples all agree still has an uncertainty."""
+        p = (self.coverage * self.n + 0.5) / (self.n + 1.0)
+        return p * (1.0 - p) / self.n
+
+    def brightened(self, factor: float, where: tuple[slice, slice] | None = None) -> "PixelMoments":
+        """A copy with the beauty scaled by ``factor`` (everywhere, or in the window ``where``):
+        what a render that is that much brighter there would have returned."""
+        mean, m2 = self.mean.copy(), self.m2.copy()
+        sl = (slice(None), slice(None)) if where is None else where
+        mean[sl] *= factor
+        m2[sl] *= factor * factor
+        return replace(self, mean=mean, m2=m2)
+
+
+@dataclass
+class WelchResult:
+    """Outcome of :func:`welch_compare`.
+
+    Attributes
+    ----------
+    passed : bool
+        No test failed.
+    failures : list of str
+        One line per failed test.
+    pixel_pass : float
+        Fraction of pixel-channels that passed the per-pixel test.
+    window_z : float
+        Largest ``|z|`` of a window; ``window_where`` its top-left ``(y, x)``.
+    mean_z : tuple of float
+        Signed ``z`` of the image mean of R, G, B, Y.
+    mean_shift : tuple of float
+        Relative shift of those means (test against reference).
+    coverage_z, depth_z : float
+        Largest per-pixel ``|z|`` of coverage and (fully covered) depth.
+    limits : dict of str to float
+        The thresholds applied.
+    z_map : numpy.ndarray
+        Per-pixel ``|z|`` of luminance ``(H, W)``.
+    window_map : numpy.ndarray
+        ``|z|`` of every window, ``(H - s + 1, W - s + 1)``.
+    geometry_map : numpy.ndarray
+        Per-pixel ``max(|z_coverage|, |z_depth|)``.
+    """
+
+    passed: bool
+    failures: list[str]
+    pixel_pass: float
+    window_z: float
+    window_where: tuple[int, int]
+    mean_z: tuple[float, ...]
+    mean_shift: tuple[float, ...]
+    coverage_z: float
+    depth_z: float
+    limits: dict
+    z_map: np.ndarray = field(repr=False)
+    window_map: np.ndarray = field(repr=False)
+    geometry_map: np.ndarray = field(repr=False)
+
+    def summary(self) -> str:
+        """One line with every number and its limit."""
+        lim = self.limits
+        return (f"{'PASS' if self.passed else 'FAIL'}: pixels {self.pixel_pass:.4%} pass (need "
+                f"{lim['pixel_pass']:.2%}), worst {WINDOW}x{WINDOW} window |z| {self.window_z:.2f} at (y, x) = "
+                f"{self.window_where} (limit {lim['window_z']:.2f}), image mean z "
+                f"{', '.join(f'{c} {z:+.2f}' for c, z in zip('RGBY', self.mean_z))} (limit {lim['mean_z']:.2f}), "
+                f"coverage |z| {self.coverage_z:.2f}, depth |z| {self.depth_z:.2f} (limit {lim['geometry_z']:.2f})")
+
+    def numbers(self) -> dict:
+        """The scalar results (JSON compatible), without the maps."""
+        return {"passed": self.passed, "failures": list(self.failures), "pixel_pass": self.pixel_pass,
+                "window_z": self.window_z, "window_where": list(self.window_where), "mean_z": list(self.mean_z),
+                "mean_shift": list(self.mean_shift), "coverage_z": self.coverage_z, "depth_z": self.depth_z,
+                "limits": dict(self.limits)}
+
+
+def _check_pair(ref: PixelMoments, test: PixelMoments) -> None:
+    if ref.shape != test.shape:
+        raise ValueError(f"image sizes differ: reference {ref.shape[1]}x{ref.shape[0]}, "
+                         f"test {test.shape[1]}x{test.shape[0]} (width x height)")
+    if not np.all(np.isfinite(ref.mean)) or not np.all(np.isfinite(ref.m2)):
+        raise ValueError("the reference has NaN or infinite pixels")
+
+
+def _noise(ref: PixelMoments, test: PixelMoments) -> np.ndarray:
+    """``(H, W, 4)``: variance of ``m_test - m_ref`` per pixel, without the floor."""
+    return ref.mean_variance() + test.mean_variance()
+
+
+def _window_sums(a: np.ndarray, s: int) -> np.ndarray:
+    # Summed-area table (Crow 1984) in float64: four look-ups per window.
+    sat = np.zeros((a.shape[0] + 1, a.shape[1] + 1))
+    np.cumsum(np.cumsum(a, axis=0), axis=1, out=sat[1:, 1:])
+    return sat[s:, s:] - sat[:-s, s:] - sat[s:, :-s] + sat[:-s, :-s]
+
+
+def _z(diff, var, level):
+    return diff / np.sqrt(var + (FLOOR_REL * level) ** 2 + _TINY)
+
+
+def _window_z(ref: PixelMoments, test: PixelMoments, s: int) -> np.ndarray:
+    d = test.mean4[..., 3] - ref.mean4[..., 3]
+    v = _noise(ref, test)[..., 3]
+    return _z(_window_sums(d, s), _window_sums(v, s), _window_sums(np.abs(ref.mean4[..., 3]), s))
+
+
+def _mean_z(ref: PixelMoments, test: PixelMoments) -> np.ndarray:
+    d = (test.mean4 - ref.mean4).sum(axis=(0, 1))
+    v = _noise(ref, test).sum(axis=(0, 1))
+    return _z(d, v, np.abs(ref.mean4).sum(axis=(0, 1)))
+
+
+def welch_compare(ref: PixelMoments, test: PixelMoments, alpha: float = ALPHA,
+                  geometry: bool = True) -> WelchResult:
+    """Test whether ``test`` and ``ref`` are renders of the same image (see the module doc).
+
+    Parameters
+    ----------
+    ref : PixelMoments
+        The reference (usually a few times the test's samples).
+    test : PixelMoments
+        The render under test, with samples independent of the reference's.
+    alpha : float, optional
+        Family-wise false-alarm rate of the window, mean and geometry tests.
+    geometry : bool, optional
+        Run the coverage and depth test (false where a side has no such layers,
+        see :meth:`PixelMoments.from_batches`).
+
+    Returns
+    -------
+    WelchResult
+        Non-finite test pixels are a failure of their own and count 0 in the tests.
+
+    Raises
+    ------
+    ValueError
+        Different image sizes, or a non-finite reference.
+    """
+    _check_pair(ref, test)
+    bad = ~(np.all(np.isfinite(test.mean), axis=2) & np.all(np.isfinite(test.m2), axis=2))
+    if bad.any():
+        test = replace(test, mean=np.where(bad[..., None], 0.0, test.mean),
+                       m2=np.where(bad[..., None], 0.0, test.m2))
+    h, w = ref.shape
+    failures = []
+    if bad.any():
+        ys, xs = np.nonzero(bad)
+        failures.append(f"{int(bad.sum())} test pixel(s) are NaN or infinite (first at y={ys[0]}, x={xs[0]})")
+
+    # 1. Pixels (Mitsuba's rule), on R, G, B.
+    z_pix = np.abs(_z(test.mean4 - ref.mean4, _noise(ref, test), np.abs(ref.mean4)))
+    z_pixel_limit = sidak_z(PIXEL_ALPHA, h * w * 3)
+    pixel_pass = float(np.mean(z_pix[..., :3] <= z_pixel_limit))
+    if pixel_pass < PIXEL_PASS_FRACTION:
+        failures.append(f"{1 - pixel_pass:.3%} of pixel-channels differ significantly (|z| > {z_pixel_limit:.2f}); "
+                        f"at most {1 - PIXEL_PASS_FRACTION:.2%} may")
+
+    # 2. Windows, on luminance.
+    s = max(1, min(WINDOW, h, w))
+    wz = np.abs(_window_z(ref, test, s))
+    wy, wx = np.unravel_index(int(np.argmax(wz)), wz.shape)
+    z_window_limit = sidak_z(alpha, wz.size)
+    if wz[wy, wx] > z_window_limit:
+        rel = _window_sums(test.mean4[..., 3] - ref.mean4[..., 3], s)[wy, wx] / max(
+            _window_sums(ref.mean4[..., 3], s)[wy, wx], _TINY)
+        failures.append(f"{s}x{s} window at (y={wy}, x={wx}) differs in luminance by {rel:+.1%} (|z| = "
+                        f"{wz[wy, wx]:.1f} > {z_window_limit:.2f}); {int((wz > z_window_limit).sum())} window "
+                        f"position(s) over the limit")
+
+    # 3. Image mean, per channel and luminance.
+    mz = _mean_z(ref, test)
+    z_mean_limit = sidak_z(alpha, 4)
+    ref_sum = ref.mean4.sum(axis=(0, 1))
+    shift = (test.mean4.sum(axis=(0, 1)) - ref_sum) / np.maximum(np.abs(ref_sum), _TINY)
+    worst = int(np.argmax(np.abs(mz)))
+    if abs(mz[worst]) > z_mean_limit:
+        failures.append(f"image mean of {'RGBY'[worst]} shifted by {shift[worst]:+.3%} (z = {mz[worst]:+.1f}, "
+                        f"limit {z_mean_limit:.2f}); R {shift[0]:+.3%}, G {shift[1]:+.3%}, B {shift[2]:+.3%}")
+
+    # 4. Geometry: coverage everywhere, depth where every sample of both hit.
+    z_geometry_limit = sidak_z(alpha, h * w)
+    cov_z = np.abs(_z(test.coverage - ref.coverage,
+                      ref.coverage_mean_variance() + test.coverage_mean_variance(), 1.0))
+    full = (ref.coverage >= 1.0 - 1e-6) & (test.coverage >= 1.0 - 1e-6)
+    dep_z = np.where(full, np.abs(_z(test.depth - ref.depth, ref.depth_mean_variance() + test.depth_mean_variance(),
+                                     np.abs(ref.depth))), 0.0)
+    if not geometry:
+        cov_z, dep_z = np.zeros((h, w)), np.zeros((h, w))
+    for what, zmap, sign in (("coverage", cov_z, test.coverage - ref.coverage), ("depth", dep_z,
+                                                                                  test.depth - ref.depth)):
+        over = zmap > z_geometry_limit
+        if over.any():
+            y, x = np.unravel_index(int(np.argmax(zmap)), zmap.shape)
+            failures.append(f"{what} differs at {int(over.sum())} pixel(s) (worst y={y}, x={x}: {sign[y, x]:+.3g}, "
+                            f"|z| = {zmap[y, x]:.1f} > {z_geometry_limit:.2f})")
+
+    limits = {"pixel_z": z_pixel_limit, "pixel_pass": PIXEL_PASS_FRACTION, "window_z": z_window_limit,
+              "mean_z": z_mean_limit, "geometry_z": z_geometry_limit, "alpha": alpha}
+    return WelchResult(passed=not failures, failures=failures, pixel_pass=pixel_pass, window_z=float(wz[wy, wx]),
+                       window_where=(int(wy), int(wx)), mean_z=tuple(float(v) for v in mz),
+                       mean_shift=tuple(float(v) for v in shift), coverage_z=float(cov_z.max()),
+                       depth_z=float(dep_z.max()), limits=limits, z_map=z_pix[..., 3], window_map=wz,
+                       geometry_map=np.maximum(cov_z, dep_z))
+
+
+def weakest_window(ref: PixelMoments, test: PixelMoments, change: float = PATCH_CHANGE) -> tuple[tuple[int, int], float]:
+    """The window where brightening the test by ``change`` is least significant.
+
+    Returns
+    -------
+    ((y, x), z)
+        Top-left pixel of the window and the ``z`` that the change alone would
+        give there (noise of the brightened test and the reference), among
+        windows at least :data:`DARK_WINDOW` as bright as the image mean.
+    """
+    h, w = ref.shape
+    s = max(1, min(WINDOW, h, w))
+    y_ref = ref.mean4[..., 3]
+    sums = _window_sums(y_ref, s)
+    k = 1.0 + change
+    var = _window_sums(ref.mean_variance()[..., 3] + k * k * test.mean_variance()[..., 3], s)
+    z = change * sums / np.sqrt(var + (FLOOR_REL * sums) ** 2 + _TINY)
+    eligible = sums >= DARK_WINDOW * s * s * max(float(y_ref.mean()), _TINY)
+    z = np.where(eligible, z, np.inf)
+    y, x = np.unravel_index(int(np.argmin(z)), z.shape)
+    return (int(y), int(x)), float(z[y, x])
+
+
+def power_check(ref: PixelMoments, test: PixelMoments, alpha: float = ALPHA) -> list[str]:
+    """Prove on ``test`` that the tests reject a 1 % global and a 25 % local brightening.
+
+    The changes are injected into ``test`` (means and second moments scaled as a
+    brighter render's would be): :data:`SHIFT` everywhere must fail the image-mean
+    test, :data:`PATCH_CHANGE` in the weakest window (:func:`weakest_window`) the
+    window test.
+
+    Parameters
+    ----------
+    ref, test : PixelMoments
+        As for :func:`welch_compare` (``test`` should itself pass).
+    alpha : float, optional
+        As for :func:`welch_compare`.
+
+    Returns
+    -------
+    list of str
+        One line per change that went undetected, naming the samples per pixel
+        that would detect it (empty: both detected).
+    """
+    out = []
+    z_mean_limit = sidak_z(alpha, 4)
+    shifted = _mean_z(ref, test.brightened(1.0 + SHIFT))
+    if not np.any(np.abs(shifted) > z_mean_limit):
+        # The injected change's z grows like sqrt(n); the noise's z does not.
+        gain = abs(shifted[3] - _mean_z(ref, test)[3])
+        out.append(f"a {SHIFT:.0%} global brightening is not detected (z = {shifted[3]:+.2f}, limit "
+                   f"{z_mean_limit:.2f}): {_spp_hint(test.n, gain, z_mean_limit)}")
+    (wy, wx), z_expected = weakest_window(ref, test)
+    h, w = ref.shape
+    s = max(1, min(WINDOW, h, w))
+    patched = test.brightened(1.0 + PATCH_CHANGE, (slice(wy, wy + s), slice(wx, wx + s)))
+    z_window_limit = sidak_z(alpha, (h - s + 1) * (w - s + 1))
+    zp = abs(float(_window_z(ref, patched, s)[wy, wx]))
+    if zp <= z_window_limit:
+        out.append(f"a {PATCH_CHANGE:.0%} brightening of the {s}x{s} window at (y={wy}, x={wx}) is not detected "
+                   f"(|z| = {zp:.2f}, limit {z_window_limit:.2f}): {_spp_hint(test.n, z_expected, z_window_limit)}")
+    return out
+
+
+def _spp_hint(n: int, z_expected: float, limit: float) -> str:
+    # z of a fixed change grows like sqrt(n) (both renders scaled together); aim
+    # for 3 sigma above the limit so that the check itself rarely misfires.
+    if not np.isfinite(z_expected) or z_expected <= 0:
+        return "raise the test spp"
+    need = n * ((limit + 3.0) / z_expected) ** 2
+    return f"the test needs about {int(math.ceil(need))} spp (has {n})"
