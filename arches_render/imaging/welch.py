@@ -68,7 +68,8 @@ from scipy.special import ndtri
 from .compare import LUMINANCE_WEIGHTS
 
 __all__ = ["PixelMoments", "WelchResult", "ALPHA", "PIXEL_ALPHA", "PIXEL_PASS_FRACTION", "WINDOW",
-           "FLOOR_REL", "SHIFT", "PATCH_CHANGE", "sidak_z", "welch_compare", "power_check"]
+           "FLOOR_REL", "SHIFT", "PATCH_CHANGE", "DARK_WINDOW", "sidak_z", "welch_compare", "power_check",
+           "weakest_window", "window_stats"]
 
 ALPHA = 1e-4
 """Family-wise false-alarm rate of the window, mean and geometry tests (each)."""
@@ -335,6 +336,21 @@ def _window_sums(a: np.ndarray, s: int) -> np.ndarray:
 
 def _z(diff, var, level):
     return diff / np.sqrt(var + (FLOOR_REL * level) ** 2 + _TINY)
+
+
+def window_stats(ref: PixelMoments, test: PixelMoments, s: int = WINDOW):
+    """Luminance sums over every ``s x s`` window (stride 1) of two renders.
+
+    Returns
+    -------
+    (numpy.ndarray, numpy.ndarray, numpy.ndarray)
+        ``sum(test - ref)``, the noise (standard deviation) of that sum, and
+        ``sum(ref)``, each ``(H - s + 1, W - s + 1)``; entry ``[y, x]`` is the
+        window whose top-left pixel is ``(y, x)``.
+    """
+    d = _window_sums(test.mean4[..., 3] - ref.mean4[..., 3], s)
+    sd = np.sqrt(_window_sums(_noise(ref, test)[..., 3], s))
+    return d, sd, _window_sums(ref.mean4[..., 3], s)
 
 
 def _window_z(ref: PixelMoments, test: PixelMoments, s: int) -> np.ndarray:

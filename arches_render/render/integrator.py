@@ -106,7 +106,7 @@ class _ImplicitPathImpl:
         self.omega = float(props.get("omega", 1.6))
         self.max_steps = int(props.get("max_steps", 512))
         self.aovs = bool(props.get("aovs", False))
-        self.moments = self.aovs and bool(props.get("moments", False))
+        self.moments = bool(props.get("moments", False)) and self.aovs
         self.heightfield_cast = bool(props.get("heightfield_cast", True))
         self.lod = bool(props.get("lod", True))
         self.lod_bounce_spread = float(props.get("lod_bounce_spread", 0.1))
