@@ -78,3 +78,13 @@ def golden(update_goldens, golden_dir, report_dir):
             # A missing golden is a to-do, not a crash: one line, no traceback.
             pytest.fail(str(e), pytrace=False)
     return run
+
+
+@pytest.fixture(scope="session")
+def dask_cluster():
+    """One Dask ``LocalCluster`` client (two worker processes) for every test that only
+    submits work to a cluster: starting one costs seconds (worker processes, each
+    importing Mitsuba on its first task). Tests that kill workers start their own."""
+    from arches_render.render.distributed import dask_client
+    with dask_client(workers=2) as client:
+        yield client

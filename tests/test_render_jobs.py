@@ -81,15 +81,13 @@ def _same_image(a, b):
         assert np.array_equal(a.layers[name], b.layers[name]), name
 
 
-def test_render_tiles_on_workers_and_on_a_scheduler_equal_the_serial_tiles(tiled, tmp_path):
-    from arches_render.render.distributed import dask_client
+def test_render_tiles_on_workers_and_on_a_scheduler_equal_the_serial_tiles(tiled, tmp_path, dask_cluster):
     scene, serial = tiled
     assert serial.header["tiles"] == "4"
     assert main(["render", str(scene), "-o", str(tmp_path / "w.exr"), "--spp", "4", "--workers", "1", "-q"]) == 0
     _same_image(serial, read_exr(tmp_path / "w.exr"))  # --workers alone means 4 tiles
-    with dask_client(workers=1) as client:
-        assert main(["render", str(scene), "-o", str(tmp_path / "s.exr"), "--spp", "4", "--tiles", "4",
-                     "--scheduler", client.scheduler.address, "-q"]) == 0
+    assert main(["render", str(scene), "-o", str(tmp_path / "s.exr"), "--spp", "4", "--tiles", "4",
+                 "--scheduler", dask_cluster.scheduler.address, "-q"]) == 0
     _same_image(serial, read_exr(tmp_path / "s.exr"))
     # Another tiling is other sample streams: other bits, the same coverage of every pixel.
     assert main(["render", str(scene), "-o", str(tmp_path / "t3.exr"), "--spp", "4", "--tiles", "3", "-q"]) == 0

@@ -83,8 +83,7 @@ def test_turntable_frames_resume_and_mp4(rock, tmp_path, capsys):
     assert "skipped" not in capsys.readouterr().out
 
 
-def test_turntable_on_dask_localcluster_equals_serial(rock, tmp_path):
-    from arches_render.render.distributed import dask_client
+def test_turntable_on_dask_localcluster_equals_serial(rock, tmp_path, dask_cluster):
     from arches_render.render.turntable import plan_turntable, render_turntable
     from arches_render.scene import load_scene
     desc = load_scene(rock)
@@ -93,17 +92,17 @@ def test_turntable_on_dask_localcluster_equals_serial(rock, tmp_path):
     render_turntable(serial)
     (tmp_path / "dask").mkdir()
     dist = plan_turntable(desc, rock, tmp_path / "dask", 4, 2, 32, 18)
-    with dask_client(workers=2) as client:
-        assert len(client.scheduler_info()["workers"]) == 2
-        written = render_turntable(dist, client=client)
-        # The CLI on a running cluster (--scheduler ADDRESS).
-        assert main(["turntable", str(rock), "-o", str(tmp_path / "cli"), "--frames", "4", "--spp", "2",
-                     "--resolution", "32x18", "--scheduler", client.scheduler.address, "-q"]) == 0
-        # Golden regeneration on the same cluster: the same reference bits as serially,
-        # and as the golden tests' own renderer (render_moments).
-        from arches_render.render.distributed import regenerate_goldens
-        kw = dict(width=24, height=16, ref_spp=64, test_spp_of=lambda name: 16)
-        g_dask = regenerate_goldens([rock], tmp_path / "g_dask", client=client, **kw)[0]
+    client = dask_cluster
+    assert len(client.scheduler_info()["workers"]) == 2
+    written = render_turntable(dist, client=client)
+    # The CLI on a running cluster (--scheduler ADDRESS).
+    assert main(["turntable", str(rock), "-o", str(tmp_path / "cli"), "--frames", "4", "--spp", "2",
+                 "--resolution", "32x18", "--scheduler", client.scheduler.address, "-q"]) == 0
+    # Golden regeneration on the same cluster: the same reference bits as serially,
+    # and as the golden tests' own renderer (render_moments).
+    from arches_render.render.distributed import regenerate_goldens
+    kw = dict(width=24, height=16, ref_spp=64, test_spp_of=lambda name: 16)
+    g_dask = regenerate_goldens([rock], tmp_path / "g_dask", client=client, **kw)[0]
     g_serial = regenerate_goldens([rock], tmp_path / "g_serial", **kw)[0]
     from arches_render.imaging.golden import load_golden
     from arches_render.render.renderer import build_scene, render_moments
