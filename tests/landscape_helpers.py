@@ -49,16 +49,23 @@ def pixel_rays(camera, width, height):
     return centre, corners.max(axis=0), corners.min(axis=0)
 
 
-def render_shot(desc, width, height, spp=1, camera=None, seed=0):
-    """Render ``desc`` (through ``camera``, default its own) with AOVs: ``(beauty, layers)``."""
+def render_shots(desc, width, height, spp=1, seed=0) -> dict:
+    """Render every camera of ``desc`` with AOVs: ``{name: (beauty, layers)}``.
+
+    One scene is built and its camera moved between shots (a parameter edit): the
+    kernels compile once, not once per camera.
+    """
     from helpers import variant
     variant()
     from arches_render.render.jobs import set_camera
     from arches_render.render.renderer import build_scene, render_layers
-    cam = camera or desc.camera
     scene = build_scene(desc, "field", width, height, aovs=True)
-    set_camera(scene, cam.origin, cam.target, cam.up, cam.fov)
-    return render_layers(scene, spp, seed)
+    shots = {}
+    for name, cam in desc.cameras.items():
+        set_camera(scene, cam.origin, cam.target, cam.up, cam.fov)
+        rgb, layers = render_layers(scene, spp, seed)
+        shots[name] = (np.asarray(rgb), layers)
+    return shots
 
 
 def shot_report(desc, layers, camera, width, height, sky_rows=2, margin=1.0, tol=None):
