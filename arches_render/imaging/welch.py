@@ -29,8 +29,8 @@ rate :data:`ALPHA` unless said otherwise:
 3. **Image mean**: the statistic on the sum over all pixels, per channel R, G,
    B and luminance Y (Sidak over the four): a 1 % global shift, a tint.
 4. **Geometry** (noise of lighting does not enter): per pixel, the fraction of
-   samples that hit a surface (binomial variance) and, where every sample of
-   both renders hit, the depth; Sidak over the pixels and a *single* failing
+   samples that hit a surface (Fisher's exact test on the two hit counts) and,
+   where every sample of both renders hit, the depth (Welch); Sidak over the pixels and a *single* failing
    pixel fails. A void of one pixel or a surface that moved fails here
    whatever the light does.
 
@@ -64,6 +64,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.special import ndtri
+from scipy.stats import hypergeom
 
 from .compare import LUMINANCE_WEIGHTS
 
@@ -237,11 +238,10 @@ class PixelMoments:
         """``(H, W)``: variance of the mean depth."""
         return self.depth_sample_variance() / self.n
 
-    def coverage_mean_variance(self) -> np.ndarray:
-        """``(H, W)``: binomial variance of the coverage fraction, from ``(k + 1/2) / (n + 1)``
-        so that a pixel whose samples all agree still has an uncertainty."""
-        p = (self.coverage * self.n + 0.5) / (self.n + 1.0)
-        return p * (1.0 - p) / self.n
+    @property
+    def hits(self) -> np.ndarray:
+        """``(H, W)``: the number of samples whose camera ray hit a surface."""
+        return np.rint(self.coverage * self.n)
 
     def brightened(self, factor: float, where: tuple[slice, slice] | None = None) -> "PixelMoments":
         """A copy with the beauty scaled by ``factor`` (everywhere, or in the window ``where``):
@@ -365,6 +365,24 @@ def _mean_z(ref: PixelMoments, test: PixelMoments) -> np.ndarray:
     return _z(d, v, np.abs(ref.mean4).sum(axis=(0, 1)))
 
 
+def _coverage_z(ref: PixelMoments, test: PixelMoments) -> np.ndarray:
+    """``|z|`` equivalent of the exact two-sided p-value that both renders' camera rays hit
+    with the same probability, per pixel.
+
+    Given the hits of both together, the test's hits follow a hypergeometric law
+    (Fisher's exact test): exact where a pixel's hits are few, unlike the normal
+    approximation (which failed a correct render 1 time in 60: 40 of 256 reference
+    samples hit, 0 of 64 test samples, |z| = 6.2 against an exact p of 3e-5).
+    """
+    n_r, n_t = ref.n, test.n
+    k_t = test.hits
+    total = ref.hits + k_t
+    lower = hypergeom.cdf(k_t, n_r + n_t, total, n_t)
+    upper = hypergeom.sf(k_t - 1, n_r + n_t, total, n_t)
+    p = np.clip(2.0 * np.minimum(lower, upper), 0.0, 1.0)
+    return -ndtri(p / 2.0)
+
+
 def welch_compare(ref: PixelMoments, test: PixelMoments, alpha: float = ALPHA,
                   geometry: bool = True) -> WelchResult:
     """Test whether ``test`` and ``ref`` are renders of the same image (see the module doc).
@@ -434,8 +452,7 @@ def welch_compare(ref: PixelMoments, test: PixelMoments, alpha: float = ALPHA,
 
     # 4. Geometry: coverage everywhere, depth where every sample of both hit.
     z_geometry_limit = sidak_z(alpha, h * w)
-    cov_z = np.abs(_z(test.coverage - ref.coverage,
-                      ref.coverage_mean_variance() + test.coverage_mean_variance(), 1.0))
+    cov_z = _coverage_z(ref, test)
     full = (ref.coverage >= 1.0 - 1e-6) & (test.coverage >= 1.0 - 1e-6)
     dep_z = np.where(full, np.abs(_z(test.depth - ref.depth, ref.depth_mean_variance() + test.depth_mean_variance(),
                                      np.abs(ref.depth))), 0.0)
