@@ -3,7 +3,10 @@
 Mesh files (``[[meshes]]``, rock-pile supports), array files (``capsule_set``,
 ``skeletal_set``, block tiles, material stacks), textures and environment maps, and
 requests too large for the machine: each bad one exits with status 2 and one line
-naming the file, the key and what is allowed, no traceback, and nothing written.
+naming the file, the key and what is allowed, no traceback, and nothing written. A
+good one loads what was written: what ``info`` reports (node kinds, the field's
+bounds, mesh count) and what the loader holds (arrays, mesh geometry) are compared
+with the arrays and meshes the test wrote.
 All run ``arches-render info`` in this process (loading only: milliseconds each).
 """
 
@@ -17,12 +20,33 @@ import numpy as np
 import pytest
 
 from helpers import variant
-from robust_helpers import BASE_SCENE, assert_one_line_error, cli, write
+from robust_helpers import BASE_SCENE, assert_one_line_error, cli, cli_out, write
+
+#: The field bounds of BASE_SCENE's ball (centre (0, 0, 0.5), radius 1).
+BALL = (np.array([-1.0, -1.0, -0.5]), np.array([1.0, 1.0, 1.5]))
 
 
 @pytest.fixture(autouse=True)
 def _variant():
     variant()
+
+
+def _info(capsys, scene) -> dict:
+    """``arches-render info SCENE`` (exit 0 asserted): ``meshes`` (int), ``kinds`` ({kind: count} of
+    the field's nodes) and ``bounds`` ((lo, hi) of the field, as printed: centimetres)."""
+    import re
+    rc, out, err = cli_out(capsys, "info", scene)
+    assert rc == 0, err
+    lines = {ln[:11].strip(): ln[11:].strip() for ln in out.splitlines() if ln[:11].strip()}
+    kinds = dict((k, int(v)) for k, v in re.findall(r"(\w+) (\d+)", lines["field"].split("(", 1)[1]))
+    lo, hi = (np.array([float(v) for v in part.strip(" []m").split(",")]) for part in lines["bounds"].split(".."))
+    return {"meshes": int(lines["meshes"]), "kinds": kinds, "bounds": (lo, hi)}
+
+
+def _assert_bounds(info, lo, hi):
+    """The field's bounds as ``info`` prints them (2 decimals) are ``lo .. hi``."""
+    assert np.allclose(info["bounds"][0], lo, atol=0.005) and np.allclose(info["bounds"][1], hi, atol=0.005), (
+        info["bounds"], lo, hi)
 
 
 def _scene_with(tmp_path, nodes="", tables="", lights=None, material=""):
@@ -91,10 +115,21 @@ def test_bad_scene_mesh_files_exit_2_naming_file_and_key(tmp_path, capsys, case)
     assert_one_line_error(rc, err, str(scene), "meshes[0].file", *words)
 
 
+def _assert_mesh_loaded(desc, index, mesh):
+    """Scene mesh ``index`` holds ``mesh``: its vertex and face counts, and its bounding box."""
+    import mitsuba as mi
+    shape = mi.load_dict({k: v for k, v in desc.meshes[index].items() if k != "bsdf"})
+    assert (shape.vertex_count(), shape.face_count()) == (len(mesh.vertices), len(mesh.faces))
+    box = shape.bbox()
+    assert np.allclose([box.min, box.max], mesh.bounds, atol=1e-6), ([box.min, box.max], mesh.bounds)
+
+
 def test_good_scene_mesh_file_loads(tmp_path, capsys):
-    _sphere(tmp_path / "ok.ply")
-    rc, err = cli(capsys, "info", _scene_with(tmp_path, tables='\n[[meshes]]\nfile = "ok.ply"\n'))
-    assert rc == 0, err
+    from arches_render.scene import load_scene
+    mesh = _sphere(tmp_path / "ok.ply")
+    scene = _scene_with(tmp_path, tables='\n[[meshes]]\nfile = "ok.ply"\n')
+    assert _info(capsys, scene)["meshes"] == 1
+    _assert_mesh_loaded(load_scene(scene), 0, mesh)
 
 
 PILE = '\n[[rock_piles]]\nsupport = {{ mesh = "{name}" }}\nrock_size = 0.3\n'
@@ -115,8 +150,10 @@ def test_open_rock_support_is_refused_but_an_open_scene_mesh_is_fine(tmp_path, c
     trimesh.Trimesh(m.vertices, m.faces[1:], process=False).export(tmp_path / "open.ply")
     rc, err = cli(capsys, "info", _scene_with(tmp_path, tables=PILE.format(name="open.ply")))
     assert_one_line_error(rc, err, "open.ply", "closed (watertight)")
-    rc, err = cli(capsys, "info", _scene_with(tmp_path, tables='\n[[meshes]]\nfile = "open.ply"\n'))
-    assert rc == 0, err
+    from arches_render.scene import load_scene
+    scene = _scene_with(tmp_path, tables='\n[[meshes]]\nfile = "open.ply"\n')
+    assert _info(capsys, scene)["meshes"] == 1
+    _assert_mesh_loaded(load_scene(scene), 0, trimesh.load(tmp_path / "open.ply", process=False))
 
 
 # ------------------------------------------------------------------------------------------- arrays
@@ -172,6 +209,24 @@ def test_bad_capsule_arrays_exit_2_naming_the_array(tmp_path, capsys, case):
     assert_one_line_error(rc, err, str(scene), "nodes.extra.file", name, *words)
 
 
+def test_a_capsule_array_file_loads_what_was_written(tmp_path, capsys):
+    """Capsules reaching beyond the ball: ``info``'s bounds are those of the written arrays
+    (``min(a, b) - r .. max(a, b) + r`` per capsule, united with the ball's)."""
+    from arches_render.scene import load_scene
+    a = np.array([[0.0, 0.0, 0.0], [4.0, 0.0, 0.0], [0.0, 3.0, 0.0]])
+    b = a + [0.0, 0.0, 2.0]
+    r = np.array([0.2, 0.3, 0.5])
+    name = _npz(tmp_path / "caps.npz", a=a, b=b, radius=r)
+    scene = _scene_with(tmp_path, nodes=f'\n[nodes.extra]\ntype = "capsule_set"\nfile = "{name}"\n')
+    info = _info(capsys, scene)
+    assert info["kinds"] == {"capsule_set": 1, "sphere": 1, "union": 1}, info
+    lo = (np.minimum(a, b) - r[:, None]).min(axis=0)
+    hi = (np.maximum(a, b) + r[:, None]).max(axis=0)
+    _assert_bounds(info, np.minimum(lo, BALL[0]), np.maximum(hi, BALL[1]))
+    (node,) = [n for n in load_scene(scene).field.walk() if n.kind == "capsule_set"]
+    assert node.n == 3 and np.allclose([node.prim_lo, node.prim_hi], [lo, hi])
+
+
 def test_object_arrays_are_never_unpickled(tmp_path, capsys):
     np.savez(tmp_path / "obj.npz", a=np.array([{"x": 1}], dtype=object), radius=np.ones(1))
     scene = _scene_with(tmp_path, nodes='\n[nodes.extra]\ntype = "skeletal_set"\nfile = "obj.npz"\n')
@@ -223,9 +278,15 @@ def test_bad_block_tiles_exit_2(tmp_path, capsys, change, words):
 
 
 def test_a_hand_made_block_tile_loads(tmp_path, capsys):
+    from arches_render.scene import load_scene
     _tile(tmp_path / "t.npz")
-    rc, err = cli(capsys, "info", _scene_with(tmp_path, nodes=BLOCKS))
-    assert rc == 0, err
+    scene = _scene_with(tmp_path, nodes=BLOCKS)
+    assert _info(capsys, scene)["kinds"] == {"blocks_field": 1, "box": 1, "sphere": 1, "union": 2}
+    (node,) = [n for n in load_scene(scene).field.walk() if n.kind == "blocks_field"]
+    with np.load(tmp_path / "t.npz", allow_pickle=False) as z:
+        for key in ("normals", "offsets", "start", "count", "anchors", "centroid"):
+            assert np.array_equal(getattr(node.tile, key), z[key]), key
+    assert node.tile.n_blocks == 1 and node.tile.size == 1.0
 
 
 STACKS = """
@@ -261,9 +322,21 @@ def test_bad_stack_files_exit_2(tmp_path, capsys, change, words):
 
 
 def test_a_saved_stack_file_loads_back(tmp_path, capsys):
-    _stacks(tmp_path / "s.npz")
-    rc, err = cli(capsys, "info", _scene_with(tmp_path, nodes=STACKS))
-    assert rc == 0, err
+    """The stacks' grid (4 x 4 cells of 0.5 m from the origin) is the field's extent in ``info``'s
+    bounds (padded by the surface's smoothing radius), and the loaded columns are those written."""
+    from arches_render.scene import load_scene
+    written = _stacks(tmp_path / "s.npz")
+    scene = _scene_with(tmp_path, nodes=STACKS)
+    info = _info(capsys, scene)
+    assert info["kinds"] == {"layers": 1, "sphere": 1, "union": 1}, info
+    (node,) = [n for n in load_scene(scene).field.walk() if n.kind == "layers"]
+    far = np.asarray(written.origin, float)[:2] + np.array([written.nx, written.ny]) * written.cell + node.sigma
+    assert (written.nx, written.ny, written.cell) == (4, 4, 0.5)
+    assert np.allclose(info["bounds"][1][:2], np.maximum(far, BALL[1][:2]), atol=0.005), (info, far)
+    for key in ("nx", "ny", "cell", "dz", "n_levels"):
+        assert getattr(node.stacks, key) == getattr(written, key), key
+    for key in ("origin", "offsets", "material", "count"):
+        assert np.array_equal(getattr(node.stacks, key), getattr(written, key)), key
 
 
 # ------------------------------------------------------------------------------------------ textures
@@ -320,8 +393,12 @@ def test_textures_that_convert_say_so(tmp_path, capsys, name, said):
 
 
 def test_bundled_texture_names_still_work(tmp_path, capsys):
-    rc, err = cli(capsys, "info", _scene_with(tmp_path, material=MATERIAL.format(name="sand.png")))
+    from arches_render.scene import load_scene
+    scene = _scene_with(tmp_path, material=MATERIAL.format(name="sand.png"))
+    rc, err = cli(capsys, "info", scene)
     assert rc == 0, err
+    # Not a file of the scene's folder: the name stays the bundled texture's, for the material to find.
+    assert load_scene(scene).materials["m"]["layer0_texture"] == "sand.png"
 
 
 def test_bad_envmap_exits_2(tmp_path, capsys):
