@@ -215,14 +215,17 @@ class SphereTracer:
             # On failure the next evaluation is at t_safe; step = r_prev makes the
             # overlap test there trivially satisfied.
             done = ~failed & (t >= t_end)  # [t_start, t_end] verified free
-            alive = alive & ~new_hit & ~done & (i + 1 < budget)
+            # The budget ends the loop (its condition), not ``alive``: a lane still alive
+            # when it runs out is what TraceResult.of reports as unresolved.
+            alive = alive & ~new_hit & ~done
             t = dr.select(new_hit, t, t_next)
             return t, t_prev, r_prev, step, omega, hit, alive, i + 1
 
         omega0 = mi.Float(self.omega)
         state = (mi.Float(t_start), mi.Float(t_start), mi.Float(0.0), mi.Float(0.0), mi.Float(omega0),
                  mi.Bool(False), mi.Bool(active), mi.UInt32(0))
-        t, _, _, _, _, hit, alive, steps = dr.while_loop(state, lambda *s: s[6], body, label="sphere_trace")
+        t, _, _, _, _, hit, alive, steps = dr.while_loop(state, lambda *s: s[6] & (s[7] < budget), body,
+                                                         label="sphere_trace")
         return TraceResult.of(hit, t, steps, alive, active, self.max_steps)
 
     def trace(self, o, d, tmax, active, cone=None):
