@@ -3,15 +3,17 @@
 For each of ``render``, ``turntable``, ``amplify``, ``rocks``, ``blocks`` and
 ``layers``: an uninterrupted run in this process records the kill points it passes
 (:mod:`arches_render.faults`: every atomic publish, every cache build, every
-turntable frame). A chain of subprocesses then dies by SIGKILL at those points, each
-run starting from what the previous ones left: holding a cache entry's build lock,
-with its first output cut to half its bytes, with its last output complete but not
-renamed, between two turntable frames. After every kill the output folder holds only
-complete outputs (the same bytes as the uninterrupted run) and temporary files of
-the dead processes, and the cache holds only sealed, valid entries. A rerun then
-completes, keeps what the killed runs finished (turntable frames are not rendered
-again), leaves the output folder and the cache exactly as an uninterrupted run does
-and writes the same bits.
+turntable frame). A chain of subprocesses then dies by SIGKILL at those points
+(:func:`_kill_plan`), each run starting from what the previous ones left: between two
+turntable frames, holding a cache entry's build lock or with its first output cut to
+half its bytes, with its last output complete but not renamed. After every kill the
+output folder holds only complete outputs (the same bytes as the uninterrupted run)
+and temporary files of the dead processes, the cache holds only sealed, valid
+entries, and what earlier kills left finished is untouched. A rerun then completes,
+uses sealed cache entries and finished frames as they are (not made again), leaves
+the output folder and the cache exactly as an uninterrupted run does and writes the
+same bits. The six chains run two at a time (their runs are mostly start-up, on one
+core each).
 
 Killing after random delays (the earlier form of this test) mostly landed in the
 start-up of the subprocess and cost a whole run per kill that came too late.
@@ -31,7 +33,6 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from arches_render import atomic, cache
 from helpers import REPO, variant
