@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from helpers import SCENES, variant
+from helpers import SCENES, assert_field_matches_mesh, variant
 
 variant()
 
@@ -14,8 +14,7 @@ import drjit as dr  # noqa: E402
 import mitsuba as mi  # noqa: E402
 
 from arches_render import field as F  # noqa: E402
-from arches_render.imaging.welch import (DARK_WINDOW, PATCH_CHANGE, PixelMoments, power_check,  # noqa: E402
-                                         welch_compare, window_stats)
+from arches_render.imaging.welch import PixelMoments, power_check, welch_compare  # noqa: E402
 from arches_render.render.renderer import (build_scene, moments_of, render_image, render_layers,  # noqa: E402
                                            render_moments)
 from arches_render.scene import load_scene, parse_scene  # noqa: E402
@@ -129,18 +128,6 @@ SHIPPED_FIELDS = sorted(p.stem for p in SCENES.glob("*.toml") if "\n[field]" in 
 KNOWN_FIELD_MESH_BUGS: dict[str, str] = {}
 
 
-# Field against mesh: the mesh is the field polygonized at its voxel, so the two are
-# not the same image in expectation (silhouettes move by up to a voxel, facets shade
-# a little differently: on the default scene the mesh is 0.6 % brighter, 4.6 sigma
-# at 32 spp). These allowances are that discretization, measured on every shipped
-# scene at 96 x 54 and 32 spp (worst: a mean shift of -1.09 % at 0.24 % noise in the
-# tunnel, a window 0.8 % of its mean beyond 5.5 sigma on the basalt columns);
-# everything else is noise, known per pixel from the moments.
-MESH_MEAN_TOL = 0.01
-MESH_WINDOW_TOL = 0.05
-MESH_POWER = 0.9
-
-
 @pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.xfail(strict=True, reason=KNOWN_FIELD_MESH_BUGS[n]))
                                   if n in KNOWN_FIELD_MESH_BUGS else n for n in SHIPPED_FIELDS])
 def test_shipped_scene_field_agrees_with_mesh(name):
@@ -150,10 +137,8 @@ def test_shipped_scene_field_agrees_with_mesh(name):
       silhouettes move by the mesh's voxel) is covered by the field in every
       sample (noise-free: a ray that gives up in rock would show the sky there,
       issue 21), and no camera ray used up both step budgets;
-    * the luminance of every 8x8 window agrees within ``MESH_WINDOW_TOL`` plus
-      5.5 sigma of its noise, and the image mean within ``MESH_MEAN_TOL`` plus
-      4.2 sigma, where a 25 % change of a window at least a quarter as bright
-      as the image would fail (checked)."""
+    * the beauty agrees window by window and in the mean, within the mesh's
+      discretization and the noise (``helpers.assert_field_matches_mesh``)."""
     from scipy.ndimage import minimum_filter
     desc = load_scene(SCENES / f"{name}.toml")
     w, h, spp = 96, 54, 32
@@ -166,22 +151,7 @@ def test_shipped_scene_field_agrees_with_mesh(name):
     assert not holes.any(), f"{holes.sum()} pixels the mesh covers show no field"
     unresolved, letters = f_layers["unresolved"]
     assert unresolved[..., letters.index("primary")].sum() == 0
-    # The beauty: windows and the image mean, beyond the discretization allowance.
-    d, sd, mu = window_stats(mesh, field)
-    excess = np.abs(d) - 5.5 * sd - MESH_WINDOW_TOL * mu
-    y, x = np.unravel_index(int(np.argmax(excess)), excess.shape)
-    assert excess[y, x] <= 0, (f"8x8 window at (y={y}, x={x}) differs by {d[y, x] / mu[y, x]:+.1%} "
-                               f"(noise {sd[y, x] / mu[y, x]:.1%})")
-    total = mesh.mean4[..., 3].sum()
-    shift = field.mean4[..., 3].sum() / total - 1
-    sigma = np.sqrt(mesh.mean_variance()[..., 3].sum() + field.mean_variance()[..., 3].sum()) / total
-    assert abs(shift) <= MESH_MEAN_TOL + 4.2 * sigma, f"image mean shift {shift:+.3%} (noise {sigma:.3%})"
-    # Power: the share of windows at least a quarter as bright as the image where a
-    # 25 % change would fail (the rest lie in noisy shadow at 32 spp; the goldens
-    # prove every such window at their own spp).
-    bright = mu >= DARK_WINDOW * mu.mean()
-    seen = np.mean((MESH_WINDOW_TOL * mu + 5.5 * sd < PATCH_CHANGE * mu)[bright])
-    assert seen >= MESH_POWER, f"a 25 % patch change would fail in only {seen:.1%} of the bright windows"
+    assert_field_matches_mesh(field, mesh)
 
 
 def test_material_mask_and_other_lights(tmp_path):
