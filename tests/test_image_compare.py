@@ -68,6 +68,7 @@ def test_sidak_quantiles():
     from scipy.stats import norm
     for a, m in ((1e-4, 4), (1e-4, 7865), (0.01, 27648)):
         per = 1 - (1 - a) ** (1 / m)
+        # rel 1e-6: the inverse normal CDF's own precision, not a tolerance of the test.
         assert 2 * norm.sf(sidak_z(a, m)) == pytest.approx(per, rel=1e-6)
 
 
@@ -239,6 +240,8 @@ def test_moments_are_deterministic_and_consistent(render):
     means = np.stack([render(100 + k, 8).mean4 for k in range(24)])
     predicted = np.mean([render(200 + k, 8).mean_variance() for k in range(4)], axis=0)
     ratio = means.var(axis=0, ddof=1).sum(axis=(0, 1)) / predicted.sum(axis=(0, 1))
+    # 24 renders estimate the spread with ~1/sqrt(23) = 21 % error per pixel; pooled over
+    # the image it is a few %, so 10 % separates a right estimate from one off by 1/n or n.
     np.testing.assert_allclose(ratio, 1.0, atol=0.1)
 
 
@@ -253,6 +256,7 @@ def test_golden_files(made):
     assert img.header["resolution"] == f"{RES}x{RES}" and img.header["version.arches_render"]
     assert set(img.layers) == {"variance", "coverage", "depth", "depth_variance"}
     np.testing.assert_array_equal(img.rgb, np.float32(g.ref.mean))
+    # The EXR holds float32; the golden's moments were computed in float64 from it.
     np.testing.assert_allclose(img.layers["variance"], g.ref.sample_variance(), rtol=1e-5, atol=1e-12)
 
 

@@ -121,6 +121,7 @@ def _assert_mesh_loaded(desc, index, mesh):
     shape = mi.load_dict({k: v for k, v in desc.meshes[index].items() if k != "bsdf"})
     assert (shape.vertex_count(), shape.face_count()) == (len(mesh.vertices), len(mesh.faces))
     box = shape.bbox()
+    # Mitsuba holds vertices in float32: the box agrees to float32 rounding of metre-sized values.
     assert np.allclose([box.min, box.max], mesh.bounds, atol=1e-6), ([box.min, box.max], mesh.bounds)
 
 
@@ -332,6 +333,7 @@ def test_a_saved_stack_file_loads_back(tmp_path, capsys):
     (node,) = [n for n in load_scene(scene).field.walk() if n.kind == "layers"]
     far = np.asarray(written.origin, float)[:2] + np.array([written.nx, written.ny]) * written.cell + node.sigma
     assert (written.nx, written.ny, written.cell) == (4, 4, 0.5)
+    # info prints bounds with 2 decimals: half a unit of the last digit.
     assert np.allclose(info["bounds"][1][:2], np.maximum(far, BALL[1][:2]), atol=0.005), (info, far)
     for key in ("nx", "ny", "cell", "dz", "n_levels"):
         assert getattr(node.stacks, key) == getattr(written, key), key
