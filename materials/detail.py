@@ -19,10 +19,10 @@ standard deviation of one octave (measured over 10^6 random points), so that
   component has standard deviation 0.70 ``2^k g^k / lambda``); the shading
   normal becomes ``n' = normalize(n - (grad H - (grad H . n) n))`` (Blinn 1978,
   bump mapping by the surface gradient of a height field), so ``B`` is the RMS
-  slope of the bumps (0.15: about 8.5 degrees). The gradient comes
-  from the tetrahedron technique (four taps ``p + e k_i``, ``k_i`` the vertices of
-  a tetrahedron, ``grad H ~ sum_i k_i H(p + e k_i) / (4 e)``), whose mean is also
-  the value ``h`` used above, so the four taps are all the noise evaluated.
+  slope of the bumps (0.15: about 8.5 degrees). The gradient is the noise's
+  analytic one (:func:`~arches_render.field.noise.gradient_noise_grad`), evaluated
+  with the value in one pass over the cell's corners: one noise evaluation per
+  octave instead of four taps of a finite difference.
 
 Footprint cutoff. A pixel of the camera covers, at distance ``t``, a disc of
 radius ``r = t spread`` on a surface facing it (``spread`` = the pixel's
@@ -37,8 +37,9 @@ is 1 above four footprints and 0 at two (Nyquist), continuous in the footprint,
 so far terrain does not alias or sparkle and near terrain keeps every octave.
 This is the footprint of the ray cones of Amanatides (1984) and of the "LOD"
 contract of the field nodes (``footprint = r0 + t spread``, here ``r0 = 0``).
-For secondary vertices ``t`` is the bounce length, which under-estimates the
-cone and keeps more detail where it is integrated away anyway.
+At secondary vertices the integrator passes its ray cone instead (widened by
+each non-specular bounce), so the fine octaves are dropped where the bounce
+integrates them away.
 
 References
 ----------
@@ -56,7 +57,7 @@ import math
 import drjit as dr
 import mitsuba as mi
 
-from ..field.noise import gradient_noise
+from ..field.noise import gradient_noise_grad
 
 __all__ = ["DETAIL_KEYS", "LOD_FACTOR", "MAX_OCTAVES", "Detail", "footprint", "pixel_spread", "octave_weight"]
 
@@ -66,9 +67,6 @@ MAX_OCTAVES = 10
 #: Plugin properties of the detail layer and their defaults (``detail_octaves = 0``: none).
 DETAIL_KEYS = {"detail_octaves": 0, "detail_wavelength": 4.0, "detail_gain": 0.6, "detail_albedo": 0.3,
                "detail_roughness": 0.3, "detail_bump": 0.15, "detail_seed": 0}
-# The four tetrahedron taps of the gradient, and their step in units of the finest wavelength.
-_TETRA = ((1, -1, -1), (-1, -1, 1), (-1, 1, -1), (1, 1, 1))
-_TAP = 0.05
 #: Standard deviation of one octave of the gradient noise (10^6 random points: 0.270), and of
 #: each component of its gradient (5 10^5 points, central differences: 0.69-0.72).
 NOISE_STD, GRAD_STD = 0.27, 0.70
@@ -92,7 +90,7 @@ def pixel_spread(fov_deg: float, width: int) -> float:
     return 2.0 * math.tan(math.radians(float(fov_deg)) * 0.5) / max(int(width), 1)
 
 
-def footprint(si, spread):
+def footprint(si, spread, cone_radius=None):
     """Pixel footprint (metres) at a surface interaction (see the module docstring).
 
     Parameters
@@ -101,12 +99,20 @@ def footprint(si, spread):
         Needs ``t`` and ``wi`` (local).
     spread : mi.Float
         Pixel angular size (0: no footprint, full detail).
+    cone_radius : mi.Float, optional
+        The radius of the path's ray cone at ``si`` where the integrator tracks one
+        (:mod:`arches_render.render.integrator`: a bounce widens it by the BSDF
+        lobe), used instead of ``si.t * spread / 2``: at a secondary vertex the bounce
+        length alone under-estimates the footprint and keeps detail that the
+        bounce integrates away.
 
     Returns
     -------
     mi.Float
     """
     cos = dr.maximum(dr.abs(mi.Float(si.wi.z)), 0.05)
+    if cone_radius is not None:
+        return 2.0 * cone_radius * dr.rsqrt(cos)
     t = dr.select(dr.isfinite(si.t), si.t, 0.0)
     return t * spread * dr.rsqrt(cos)
 
@@ -159,20 +165,15 @@ class Detail:
         return cls(get["detail_octaves"], get["detail_wavelength"], get["detail_gain"], get["detail_albedo"],
                    get["detail_roughness"], get["detail_bump"], get["detail_seed"])
 
-    def _h(self, p, weights, inv_wl):
-        """The fBm sum ``sum_k c_k g^k n_k`` at ``p`` (not normalised) with the octave weights given."""
-        total = mi.Float(0.0)
-        q = p * inv_wl
-        amp = mi.Float(1.0)
-        for k in range(self.octaves):
-            # Fixed irrational offsets per octave hide the shared lattice origin.
-            total += weights[k] * amp * gradient_noise(q + 31.7 * (k + 1), self.seed + k)
-            q = q * 2.0
-            amp = amp * self.params["detail_gain"]
-        return total
-
     def eval(self, p, n, fp, active=True):
         """Albedo factor, roughness factor and bumped normal at ``p``.
+
+        Octave ``k`` contributes ``c_k g^k n_k`` to ``h`` and ``c_k g^k 2^k grad n_k /
+        lambda`` to ``grad H`` (the noise's analytic gradient,
+        :func:`~arches_render.field.noise.gradient_noise_grad`); an octave whose
+        weight ``c_k`` is 0 in every lane of a SIMD packet is not evaluated there
+        (a symbolic branch), so distant terrain and secondary vertices, whose wide
+        footprints drop the fine octaves, cost a few octaves, not ``K``.
 
         Parameters
         ----------
@@ -191,23 +192,28 @@ class Detail:
         P = self.params
         wl = P["detail_wavelength"]
         inv_wl = dr.rcp(wl)
-        weights, amp, var, slope_var = [], mi.Float(1.0), mi.Float(0.0), mi.Float(0.0)
+        total, grad = mi.Float(0.0), mi.Vector3f(0.0)
+        amp, var, slope_var = mi.Float(1.0), mi.Float(0.0), mi.Float(0.0)
+        q = p * inv_wl
         for k in range(self.octaves):
-            weights.append(octave_weight(wl * (0.5 ** k), fp))
+            weight = dr.select(active, octave_weight(wl * (0.5 ** k), fp), 0.0)
+
+            def octave(total, grad, q, weight, amp, k=k):
+                # Fixed irrational offsets per octave hide the shared lattice origin.
+                v, g = gradient_noise_grad(q + 31.7 * (k + 1), self.seed + k)
+                c = weight * amp
+                return total + c * v, grad + g * (c * (2.0 ** k))
+
+            total, grad = dr.if_stmt((total, grad, q, weight, amp), weight > 0.0, octave,
+                                     lambda total, grad, q, weight, amp: (total, grad), label="detail_octave")
             var += amp * amp
             slope_var += dr.square(amp * (2.0 ** k))
+            q = q * 2.0
             amp = amp * P["detail_gain"]
-        e = wl * (_TAP * 0.5 ** (self.octaves - 1))
-        raw, grad = mi.Float(0.0), mi.Vector3f(0.0)
-        for k in _TETRA:
-            kv = mi.Vector3f(*k)
-            v = self._h(mi.Point3f(p + kv * e), weights, inv_wl)
-            raw += 0.25 * v
-            grad += kv * v
-        h = raw * dr.rsqrt(var) * (1.0 / NOISE_STD)
-        # Unit RMS slope at full detail: per-axis gradient std GRAD_STD 2^k g^k / lambda per octave.
-        slope = grad * dr.rcp(4.0 * e) * (P["detail_bump"] * wl * dr.rsqrt(slope_var)
-                                          * (1.0 / (GRAD_STD * math.sqrt(2.0))))
+        h = total * dr.rsqrt(var) * (1.0 / NOISE_STD)
+        # grad_p H = grad / lambda; unit RMS slope at full detail: per-axis gradient std
+        # GRAD_STD 2^k g^k / lambda per octave, scaled to B.
+        slope = grad * (P["detail_bump"] * dr.rsqrt(slope_var) * (1.0 / (GRAD_STD * math.sqrt(2.0))))
         tangential = slope - dr.dot(slope, n) * n
         n_bumped = dr.normalize(n - tangential)
         albedo = dr.maximum(1.0 + P["detail_albedo"] * h, 0.0)

@@ -23,9 +23,9 @@ compiled kernels.
 
 Besides the layer stack (each module's docstring holds its math):
 
-* textures tile without visible repetition (``layer{i}_tiling = "histogram"``:
-  Heitz and Neyret 2018, :mod:`~arches_render.materials.textures`; the default
-  ``"repeat"`` keeps the plain repeat, which the shipped scenes and their goldens use);
+* textures tile without visible repetition (``layer{i}_tiling = "histogram"``, the
+  default: Heitz and Neyret 2018, :mod:`~arches_render.materials.textures`;
+  ``"repeat"`` is the plain repeat, an opt-out);
 * a procedural detail layer (``detail_*``): multi-scale noise on albedo and
   roughness and a bump from the same noise, cut off by the pixel footprint
   ``si.t * pixel_spread`` (:mod:`~arches_render.materials.detail`);
@@ -84,7 +84,7 @@ _LAYER_FLOATS = {
     "coverage": 1.0,
 }
 _LAYER_OTHER = {"texture": "", "tint": (1.0, 1.0, 1.0), "srgb": True, "normalize": True,
-                "name": "", "tiling": "repeat"}
+                "name": "", "tiling": "histogram"}
 _GLOBAL_PROPS = {"layer_count", "sharpness", "space", "pixel_spread", *DETAIL_KEYS}
 _LAYER_KEY = re.compile(r"layer(\d+)_")
 _SPACES = ("world", "object")
@@ -122,8 +122,9 @@ class Layer:
     name : str
         Label for presets, overrides and AOVs.
     tiling : str
-        ``'histogram'`` (random tiles, histogram-preserving blend), ``'bands'``
-        (tiles offset along u only, for banded textures) or ``'repeat'`` (the default).
+        ``'histogram'`` (random tiles, histogram-preserving blend; the default),
+        ``'bands'`` (tiles offset along u only, for banded textures) or ``'repeat'``
+        (the plain repeat, which shows its period).
     """
 
     texture: str = ""
@@ -140,7 +141,7 @@ class Layer:
     srgb: bool = True
     normalize: bool = True
     name: str = ""
-    tiling: str = "repeat"
+    tiling: str = "histogram"
 
     def __post_init__(self):
         self.tint = tuple(float(c) for c in self.tint)
@@ -415,19 +416,21 @@ class _TriplanarImpl:
             out += dr.select(on, b[k], 0.0) * c
         return out
 
-    def shade(self, si, active=True, cavity=True):
+    def shade(self, si, active=True, cavity=True, cone_radius=None):
         """The shading of ``si``, computed once and shared by :meth:`sample` and
         :meth:`eval_pdf` (their ``shading`` argument): albedo, the two Oren-Nayar
         colour terms ``sum w a A``, ``sum w a B``, and the bumped local normal.
         ``cavity``: lanes that compute the cavity term (a march of field
-        evaluations; the integrator asks for it at the camera ray's hit only)."""
+        evaluations; the integrator asks for it at the camera ray's hit only).
+        ``cone_radius``: the integrator's ray-cone radius at ``si``, for the
+        footprint (:func:`~arches_render.materials.detail.footprint`)."""
         active = mi.Bool(active)
         p = self.position(si, active)
         occ, wet = self._terrain_terms(si, active, cavity)
         w = self._weights(si, p, occ, wet)
         n = mi.Vector3f(si.sh_frame.n)
         b = triplanar_weights(n, self.sharpness)
-        fp = footprint(si, self.pixel_spread)
+        fp = footprint(si, self.pixel_spread, cone_radius)
         a_fac, r_fac, n_local = mi.Float(1.0), mi.Float(1.0), mi.Vector3f(0.0, 0.0, 1.0)
         if self.detail is not None:
             a_fac, r_fac, n_bumped = self.detail.eval(p, n, fp, active)

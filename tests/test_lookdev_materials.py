@@ -186,26 +186,21 @@ def _autocorrelation_peak(albedo, pos, cell=0.1, box=(-6.0, 6.0, 3.0, 15.0), max
     return float(win[np.hypot(yy, xx) >= min_lag].max())
 
 
-@pytest.mark.parametrize("look", ["landscape", "main"])
+@pytest.mark.parametrize("look", ["preset", "opt_out"])
 def test_ground_albedo_has_no_periodic_peak(look, tmp_path):
-    # "landscape" is the look amplify and the gallery write (histogram tiling and detail);
-    # "main" is the preset's plain look: a repeated texture, no detail.
-    extra = 'detail = false\noverrides = { "rock.scale" = 2.0, "rock.tiling" = "repeat", ' \
-            '"sand.coverage" = 0.0, "grass.coverage" = 0.0, "snow.coverage" = 0.0 }' if look == "main" else \
-            'tiling = "histogram"\ndetail = { octaves = 7, wavelength = 4.0, gain = 0.6, albedo = 0.2, ' \
-            'roughness = 0.3, bump = 0.2 }'
-    if look == "landscape":  # the table must match what amplify writes
-        from arches_render.generators.terrain.scene_writer import LANDSCAPE_LOOK
-        assert LANDSCAPE_LOOK["tiling"] == "histogram" and LANDSCAPE_LOOK["detail"]["octaves"] == 7
+    # "preset" is the terrain preset as shipped (histogram tiling and detail, issue 24);
+    # "opt_out" turns both off: a repeated texture, no detail, whose period must show.
+    extra = 'detail = false\ntiling = "repeat"\noverrides = { "rock.scale" = 2.0, ' \
+            '"sand.coverage" = 0.0, "grass.coverage" = 0.0, "snow.coverage" = 0.0 }' if look == "opt_out" else ""
     text = FLAT_GROUND.replace("{extra}", extra)
-    if look == "main":
+    if look == "opt_out":
         text = text.replace('overrides = { "rock.scale" = 2.0, "sand.coverage"', '# overrides', 1)
     desc = _scene(text, tmp_path)
     scene = build_scene(desc, "field", aovs=True)
     _, layers = render_layers(scene, 2, seed=1)
     peak = _autocorrelation_peak(layers["albedo"][0], layers["position"][0])
     THRESHOLD = 0.15
-    if look == "main":
+    if look == "opt_out":
         assert peak > THRESHOLD, f"the repeated texture should show its period (peak {peak:.3f})"
     else:
         assert peak < THRESHOLD, f"periodic peak {peak:.3f} in the ground's albedo"
@@ -250,6 +245,12 @@ def test_detail_fades_under_the_footprint_and_bumps_consistently():
     far = _np(b.albedo(_si(p, [[0, 0, 1]] * len(p), t=1e5)))[0]
     assert 0.08 < near.std() and far.std() < 1e-6 and mid.std() < near.std()
     assert abs(far.mean() - 0.5) < 1e-6
+    # A secondary vertex 1 m from the last bounce, its ray cone 0.5 m wide: the cone, not
+    # the bounce length, sets the footprint (the fine octaves drop out).
+    si = _si(p, [[0, 0, 1]] * len(p), t=1.0)
+    fp_pixel = _np(D.footprint(si, params["pixel_spread"]))
+    fp_cone = _np(D.footprint(si, params["pixel_spread"], mi.Float(0.25)))
+    assert np.allclose(fp_cone, 0.5, rtol=1e-5) and (fp_pixel < 0.01).all()
     assert [float(D.octave_weight(mi.Float(w), mi.Float(1.0))[0]) for w in (1.9, 2.0, 3.0, 4.0, 9.0)] == \
         pytest.approx([0.0, 0.0, 0.5, 1.0, 1.0])
     # Bumped: sample weight == eval / pdf, nothing below the geometric surface.

@@ -105,6 +105,65 @@ def gradient_noise(p, seed):
     return result
 
 
+def fade_derivative(t):
+    """``s'(t) = 30 t^2 (t - 1)^2``, the derivative of :func:`fade`."""
+    return 30.0 * t * t * dr.square(t - 1.0)
+
+
+def corner_gradient(h):
+    """The improved-noise gradient ``g`` that :func:`grad_dot` dots with, as a vector.
+
+    ``grad_dot(h, d) = s1 d_a + s2 d_b`` with axis ``a = x`` (``h < 8``) else ``y``,
+    axis ``b = y`` (``h < 4``), ``x`` (``h`` 12 or 14) else ``z``, and signs from bits
+    0 and 1 of ``h``; so ``g = s1 e_a + s2 e_b``.
+    """
+    s1 = dr.select((h & 1) == 0, 1.0, -1.0)
+    s2 = dr.select((h & 2) == 0, 1.0, -1.0)
+    b_is_x = (h >= 4) & ((h == 12) | (h == 14))
+    gx = dr.select(h < 8, s1, 0.0) + dr.select(b_is_x, s2, 0.0)
+    gy = dr.select(h < 8, 0.0, s1) + dr.select(h < 4, s2, 0.0)
+    gz = dr.select((h >= 4) & ~b_is_x, s2, 0.0)
+    return mi.Vector3f(gx, gy, gz)
+
+
+def gradient_noise_grad(p, seed):
+    """:func:`gradient_noise` and its gradient at ``p``, in one pass over the corners.
+
+    With ``n = sum_c W_c(u) g_c . (u - c)`` (module docstring), the product rule gives
+    ``grad n = sum_c (grad W_c) (g_c . (u - c)) + W_c g_c``, where the ``k``-th
+    component of ``grad W_c`` replaces factor ``k`` of ``W_c`` by ``+-s'(u_k)``.
+    Bitwise the same value as :func:`gradient_noise`; about 1.5 times its cost, against
+    4 evaluations for a finite-difference (tetrahedron) gradient.
+
+    Returns
+    -------
+    (mi.Float, mi.Vector3f)
+    """
+    fl = dr.floor(p)
+    i = mi.Vector3i(fl)
+    u = p - fl
+    w = mi.Vector3f(fade(u.x), fade(u.y), fade(u.z))
+    dw = mi.Vector3f(fade_derivative(u.x), fade_derivative(u.y), fade_derivative(u.z))
+    ix, iy, iz = (mi.UInt32(v) for v in (i.x, i.y, i.z))
+    hx = (ix * 0x8DA6B343 ^ seed, (ix + 1) * 0x8DA6B343 ^ seed)
+    hy = (iy * 0xD8163841, (iy + 1) * 0xD8163841)
+    hz = (iz * 0xCB1AB31F, (iz + 1) * 0xCB1AB31F)
+    value, grad = mi.Float(0.0), mi.Vector3f(0.0)
+    for cx in (0, 1):
+        wx, dx = (w.x, dw.x) if cx else (1.0 - w.x, -dw.x)
+        for cy in (0, 1):
+            wy, dy = (w.y, dw.y) if cy else (1.0 - w.y, -dw.y)
+            wxy = wx * wy
+            for cz in (0, 1):
+                wz, dz = (w.z, dw.z) if cz else (1.0 - w.z, -dw.z)
+                h = corner_hash(hx[cx], hy[cy], hz[cz])
+                d = grad_dot(h, u.x - cx, u.y - cy, u.z - cz)
+                weight = wxy * wz
+                value += weight * d
+                grad += mi.Vector3f(dx * wy * wz, wx * dy * wz, wxy * dz) * d + weight * corner_gradient(h)
+    return value, grad
+
+
 def fbm(p, octaves: int, lacunarity, gain, seed, level=None):
     """Fractional Brownian motion: ``sum_k gain^k n(lacunarity^k p)``.
 

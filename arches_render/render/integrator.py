@@ -248,7 +248,8 @@ class _ImplicitPathImpl:
             shading = None
             if self.shades_field:
                 needed = active & si.is_valid() & field_hit & (primary | (depth + 1 < self.max_depth))
-                shading = self.field_bsdf.shade(si, needed, cavity=primary)
+                shading = self.field_bsdf.shade(si, needed, cavity=primary,
+                                                cone_radius=hit_cone[0] if hit_cone else None)
             if aov:
                 steps = res.steps if res is not None else mi.UInt32(0)
                 albedo = None if shading is None else shading[0]

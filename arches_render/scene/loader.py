@@ -23,11 +23,13 @@ A scene file is data, never code. Top-level tables:
                  rendered by ``turntable --path``
 ``[[lights]]``   ``type`` = ``sunsky`` | ``directional`` | ``point`` | ``constant`` | ``envmap``
 ``[materials.NAME]`` ``type = "triplanar"`` with ``preset``, ``overrides``, ``tiling`` (every
-                 layer's: ``repeat``, the default, ``histogram`` or ``bands``),
+                 layer's: ``histogram``, ``bands`` or ``repeat``; default: each layer's
+                 preset tiling, histogram or bands),
                  ``masks = [{layer, [kind], node, lo, hi}]`` (a layer's coverage times
                  ``smoothstep(lo, hi, m)``, ``m`` a field or noise node's value, the
                  cavity or the wetness) and the lookdev keys ``detail``, ``strata``,
-                 ``cavity``, ``wetness`` (:mod:`arches_render.scene.material_keys`),
+                 ``cavity``, ``wetness`` (:mod:`arches_render.scene.material_keys`;
+                 ``detail = false`` drops the preset's detail layer),
                  ``type = "diffuse"`` with ``color``, or ``type = "glossy"`` with
                  ``color``, ``roughness`` (GGX alpha, default 0.05) and ``ior`` (1.333,
                  water): a diffuse base under a dielectric coating (Mitsuba's
@@ -310,8 +312,8 @@ def _material(t: Table, builder) -> tuple[dict, list, dict]:
         except ValueError as exc:
             raise t.error("overrides" if over else "preset", str(exc)) from None
         names = [layer.name for layer in layers]
-        # Every layer's tiling at once (a layer's own override wins); the presets repeat
-        # their textures, as before the histogram-preserving blend existed.
+        # Every layer's tiling at once (a layer's own override wins); without it each layer
+        # keeps its preset's tiling (histogram, or bands for banded textures).
         tiling = t.string("tiling", None, choices=set(TILINGS))
         for i, layer in enumerate(layers):
             if tiling is not None and f"{layer.name}.tiling" not in over:

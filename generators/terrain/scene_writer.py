@@ -188,13 +188,6 @@ STRATA_PALETTE = {"sea": "limestone", "river": "sandstone", "karst": "limestone"
                   "strata": "sandstone"}
 
 
-#: Tiling without repetition and procedural detail (issue 15) for the landscapes amplify
-#: writes; the presets themselves keep their plain repeat, so older scenes render as before.
-LANDSCAPE_LOOK = {"tiling": "histogram",
-                  "detail": {"octaves": 7, "wavelength": 4.0, "gain": 0.6, "albedo": 0.2, "roughness": 0.3,
-                             "bump": 0.2}}
-
-
 def landscape_material(zlo, zhi, sea_level=None, geology=None, box=None, preset=None, cell=1.0):
     """The ``terrain`` triplanar preset with layer heights fitted to ``[zlo, zhi]``.
 
@@ -214,7 +207,8 @@ def landscape_material(zlo, zhi, sea_level=None, geology=None, box=None, preset=
         "snow.height_min": zhi - 0.05 * relief if relief > 300 else zhi + relief,
         "snow.height_soft": 0.02 * relief,
     }
-    mat = {"type": "triplanar", "preset": "terrain", "overrides": over, **LANDSCAPE_LOOK}
+    # Tiling without repetition and the detail layer come with the preset (issue 24).
+    mat = {"type": "triplanar", "preset": "terrain", "overrides": over}
     if geology is not None:
         mat.update(terrain_look(geology, box, STRATA_PALETTE.get(preset, "sandstone"), "geology", sea_level,
                                 cavity_radius=2.0 * cell))
