@@ -25,9 +25,8 @@ import numpy as np
 from scipy.ndimage import gaussian_filter
 
 import arches_render  # noqa: F401  (chooses the libLLVM before Dr.Jit loads)
-from arches_render.generators.terrain import command as amplify_command
 from arches_render.generators.terrain.amplify import amplify
-from arches_render.generators.terrain.scene_writer import toml_text
+from arches_render.generators.terrain.scene_writer import scene_document, toml_text
 
 REPO = Path(__file__).resolve().parents[1]
 GALLERY = REPO / "scenes" / "gallery"
@@ -65,8 +64,9 @@ def amplified(name, heights, cell, preset, seed=7, steps=None):
         for rel in result.files:
             (GALLERY / rel).parent.mkdir(parents=True, exist_ok=True)
             (Path(tmp) / rel).replace(GALLERY / rel)
-    # The command's own document (camera, sun, material from the geology, ground, water).
-    return amplify_command._scene_doc(result, name), result
+    # The command's own document (camera, sun, material from the geology, ground, far field,
+    # water); no close shots (the gallery picks its own camera).
+    return scene_document(result, name, GALLERY, close=0)[0], result
 
 
 def finish(doc, name, description, camera, sun, atmosphere=None, spp=32, max_depth=4, exposure=0.0):
@@ -268,8 +268,123 @@ def every_generator():
                      "(examples/make_gallery_scenes.py)")
 
 
+def gorge_dem():
+    """A sandstone plateau cut by a winding gorge 60 m deep, 400 m across (2 m cells)."""
+    nx, ny, cell = 201, 201, 2.0
+    X, Y = grid(nx, ny, cell)
+    centre = 22.0 * np.sin(Y / 70.0) + noise(X.shape, 31, 20.0, 3.0)
+    across = np.abs(X - centre)
+    # Stepped walls: a ledge a third of the way up (the strata will carve the rest).
+    walls = 0.55 * smooth((across - 9.0) / 10.0) + 0.45 * smooth((across - 20.0) / 8.0)
+    plateau = 70.0 + 0.02 * Y + noise(X.shape, 32, 25.0, 2.5)
+    return 6.0 + (plateau - 6.0) * walls + noise(X.shape, 33, 2.0, 0.3) * walls, cell
+
+
+def arch_bridge():
+    """Fig. 23 (2019): a large natural arch bridging a gorge, the river undercutting its walls."""
+    name = "fig23_arch_bridge"
+    H, cell = gorge_dem()
+    doc, _ = amplified(name, H, cell, "river", seed=29)
+    glossy_water(doc)
+    nodes = doc["nodes"]
+    # The bridge: a slab of the plateau left standing across the gorge, its opening an
+    # ellipsoid (the span the river and the wind removed), weathered by fBm and filleted
+    # into both rims. A heightfield cannot hold it: the sky shows under the span.
+    nodes["bridge_slab"] = {"type": "box", "center": [0.0, 0.0, 51.0], "size": [96.0, 16.0, 42.0],
+                            "rounding": 3.0}
+    nodes["bridge_opening"] = {"type": "scale", "factor": [34.0, 40.0, 37.0], "pivot": [0.0, 0.0, 24.0],
+                               "child": {"type": "sphere", "center": [0.0, 0.0, 24.0], "radius": 1.0}}
+    nodes["bridge"] = {"type": "displace", "amplitude": 1.2, "wavelength": 9.0, "octaves": 3, "seed": 7,
+                       "child": {"type": "difference", "children": ["bridge_slab", "bridge_opening"]}}
+    nodes["gorge_with_arch"] = {"type": "blend", "radius": 4.0, "children": [doc["field"]["root"], "bridge"]}
+    doc["field"]["root"] = "gorge_with_arch"
+    doc = finish(doc, name, "Fig. 23 (Paris et al. 2019): a large natural arch bridging a sandstone gorge "
+                 "whose river undercut the walls",
+                 # From inside the gorge, below the rims, looking up its length at the span.
+                 {"origin": [-21.0, -120.0, 36.0], "target": [0.0, 0.0, 52.0], "fov": 55.0},
+                 {"elevation": 22.0, "azimuth": -20.0},
+                 {"haze": {"density": 0.0008, "height": 60.0}}, spp=16, max_depth=3)
+    write(name, doc, "Gallery: Fig. 23 of Paris et al. 2019, arch bridge (examples/make_gallery_scenes.py)")
+
+
+def island_top_dem():
+    """A flat-topped island 240 m across: a plateau on a ragged outline, falling away outside it."""
+    nx, ny, cell = 161, 161, 2.0
+    X, Y = grid(nx, ny, cell)
+    angle = np.arctan2(Y, X)
+    outline = 100.0 + 14.0 * np.sin(3 * angle + 0.4) + 8.0 * np.sin(7 * angle + 1.3)
+    r = np.hypot(X, Y) / outline
+    top = 40.0 + 9.0 * (1.0 - np.clip(r, 0, 1) ** 2) + noise(X.shape, 41, 12.0, 2.0)
+    # Outside the outline the ground drops 40 m within a few cells: the cliffs the strata erode.
+    return (top * (1.0 - smooth((r - 0.96) / 0.08)) + noise(X.shape, 42, 2.0, 0.25)).astype(np.float32), cell
+
+
+def floating_islands():
+    """Fig. 21 (2019): floating islands: an implicitized heightfield with eroded strata, cut
+    from below by a second heightfield (its rocky underside), and two smaller copies."""
+    name = "fig21_floating_islands"
+    H, cell = island_top_dem()
+    doc, _ = amplified(name, H, cell, "strata", seed=21)
+    nodes = doc["nodes"]
+    ny, nx = H.shape
+    X, Y = grid(nx, ny, cell)
+    angle = np.arctan2(Y, X)
+    outline = 100.0 + 14.0 * np.sin(3 * angle + 0.4) + 8.0 * np.sin(7 * angle + 1.3)
+    r = np.clip(np.hypot(X, Y) / outline, 0.0, 1.2)
+    # The underside: an inverted, craggy cone 70 m deep; at and beyond the rim it sits at the
+    # rim's height (38 m), above the ground the cliffs fall to, so nothing outside remains.
+    under = 38.0 - 70.0 * (1.0 - smooth(r / 1.0)) ** 0.8 \
+        + (noise(X.shape, 43, 3.0, 5.0) + noise(X.shape, 44, 1.2, 1.5)) * (1.0 - smooth(r))
+    # Padded 20 cells at the rim's height: the implicit terrain's prism reaches beyond its DEM.
+    under = np.pad(under, 20, mode="edge")
+    np.save(GALLERY / DATA / f"{name}.underside.npy", under.astype(np.float32))
+    half = (nx - 1 + 40) * cell / 2
+    nodes["underside"] = {"type": "heightfield", "source": "file", "file": f"{DATA}/{name}.underside.npy",
+                          "extent": [-half, -half, half, half]}
+    nodes["island"] = {"type": "difference", "children": [doc["field"]["root"], "underside"]}
+    # Two smaller islands: the same construction tree, scaled and turned.
+    nodes["island_b"] = {"type": "translate", "offset": [190.0, 110.0, 60.0],
+                         "child": {"type": "rotate", "axis": [0.0, 0.0, 1.0], "angle": 120.0,
+                                   "child": {"type": "scale", "factor": 0.55, "child": "island"}}}
+    nodes["island_c"] = {"type": "translate", "offset": [-120.0, 190.0, -25.0],
+                         "child": {"type": "rotate", "axis": [0.0, 0.0, 1.0], "angle": 230.0,
+                                   "child": {"type": "scale", "factor": 0.4, "child": "island"}}}
+    nodes["islands"] = {"type": "union", "children": ["island", "island_b", "island_c"]}
+    doc["field"]["root"] = "islands"
+    # The islands float 300 m over a hazy valley floor: the ground disk goes down, the far
+    # field (a continuation of the island's DEM) is dropped.
+    doc.pop("far_field", None)
+    doc["meshes"] = [dict(m, translate=[0.0, 0.0, -300.0]) for m in doc.get("meshes", []) if m.get("shape") == "disk"]
+    doc["materials"].pop("water", None)
+    doc = finish(doc, name, "Fig. 21 (Paris et al. 2019): floating islands, implicitized heightfields "
+                 "with eroded strata and craggy undersides, over a hazy valley",
+                 {"origin": [-250.0, -200.0, 75.0], "target": [30.0, 60.0, 15.0], "fov": 55.0},
+                 {"elevation": 30.0, "azimuth": -60.0},
+                 {"haze": {"density": 0.0012, "height": 120.0}}, spp=16, max_depth=3)
+    write(name, doc, "Gallery: Fig. 21 of Paris et al. 2019, floating islands (examples/make_gallery_scenes.py)")
+
+
+def sea_cliff_steps():
+    """Fig. 11 (2019): sea cliffs after 1, 2 and 3 steps of sea erosion (a strip of three)."""
+    H, cell = island_dem()
+    for steps in (1, 2, 3):
+        name = f"fig11_sea_cliffs_step{steps}"
+        doc, _ = amplified(name, H, cell, "sea", seed=11, steps=steps)
+        glossy_water(doc)
+        doc = finish(doc, name, f"Fig. 11 (Paris et al. 2019): sea cliffs after {steps} step"
+                     f"{'s' if steps > 1 else ''} of sea erosion",
+                     {"origin": [-100.0, -100.0, 12.0], "target": [-34.0, -46.0, 9.0], "fov": 50.0},
+                     {"elevation": 24.0, "azimuth": -125.0},
+                     {"haze": {"density": 0.0015, "height": 25.0}}, max_depth=3)
+        doc["render"]["resolution"] = [640, 360]
+        write(name, doc, f"Gallery: Fig. 11 of Paris et al. 2019, sea erosion step {steps} "
+                         "(examples/make_gallery_scenes.py)")
+
+
 SCENES = {"every_generator": every_generator, "fig23_coastal_cliff": coastal_cliff,
-          "fig23_canyon_overhangs": canyon, "fig23_goblins": goblins, "fig17_karst": karst}
+          "fig23_canyon_overhangs": canyon, "fig23_goblins": goblins, "fig17_karst": karst,
+          "fig23_arch_bridge": arch_bridge, "fig21_floating_islands": floating_islands,
+          "fig11_sea_cliffs": sea_cliff_steps}
 
 
 def main(names):
