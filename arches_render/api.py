@@ -46,7 +46,7 @@ from .imaging.colour import view_to_uint8
 from .imaging.compare import Thresholds, compare as _compare
 from .imaging.exr import read_exr
 from .imaging.preview import write_png
-from .render.jobs import set_camera
+from .render.jobs import sensor_clip, set_camera
 from .render.output import render_header, write_render
 from .materials.triplanar import STRUCTURAL
 from .render.renderer import attach_atmosphere, attach_material_nodes, build_scene, load_materials, render_layers
@@ -335,5 +335,5 @@ class Lookdev:
         cam = self.desc.camera
         header = render_header(self.desc.name, self.path, seed, spp, self.width, self.height, "field",
                                (cam.origin, cam.target, cam.up, cam.fov))
-        write_render(path, rgb, layers, header)
+        write_render(path, rgb, layers, header, clip=sensor_clip(self.scene))
         write_png(path.with_suffix(".png"), view_to_uint8(rgb, view, self.desc.render.exposure))

@@ -16,7 +16,7 @@ from ..imaging.colour import VIEWS, view_to_uint8
 from ..imaging.preview import write_png
 from ..render.denoise import denoise
 from ..render.distributed import dask_client, render_tiled
-from ..render.jobs import RenderJob, prime_cache, run_job
+from ..render.jobs import RenderJob, job_clip, prime_cache, run_job, sensor_clip
 from ..render.output import render_header, write_render
 from ..render.renderer import build_scene
 from ..scene import load_scene
@@ -82,6 +82,7 @@ def run(args) -> int:
                 img, layers = render_tiled(job, tiles, client, bar)
         else:
             img, layers = render_tiled(job, tiles, None, bar)
+        clip = job_clip(job)  # the tiles' sensors were built elsewhere, or cropped
     else:
         # Build here from the scene already loaded (generators run once; mesh mode
         # polygonizes with a bar); the job then finds the scene built.
@@ -93,6 +94,7 @@ def run(args) -> int:
         prime_cache(job, desc, scene)
         bar = Progress(f"render {desc.name}", "spp", args.quiet)
         img, layers = run_job(job, bar)
+        clip = sensor_clip(scene)
     bar.close()
     denoised = None
     if args.denoise:
@@ -100,7 +102,7 @@ def run(args) -> int:
     elapsed = time.perf_counter() - t0
     header = render_header(desc.name, args.scene, seed, spp, width, height, geometry,
                            (cam.origin, cam.target, cam.up, cam.fov), tiles=tiles)
-    write_render(out, img, layers, header, denoised)
+    write_render(out, img, layers, header, denoised, clip=clip)
     png = out.with_suffix(".png")
     write_png(png, view_to_uint8(img if denoised is None else denoised, view, s.exposure))
     print(f"wrote {out} and {png} ({width}x{height}, {spp} spp, {geometry}, {elapsed:.1f} s)")

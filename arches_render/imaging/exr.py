@@ -11,6 +11,13 @@ names OpenEXR reserves or types: a string attribute called ``version`` or
 ``chunkCount`` is silently dropped by the library, and ``owner`` or
 ``capDate`` have meanings of their own.
 
+Typed OpenEXR standard attributes (``worldToCamera``, ``screenWindowWidth``, ...)
+go in under their own names through ``attributes``, with the Python types the
+OpenEXR bindings map to attribute types: a float32 ``(4, 4)`` array becomes an
+``M44f`` (Imath layout: ``a[i, j]`` is ``x[i][j]``, for row vectors), a float32
+``(2,)`` array a ``V2f``, a Python ``float`` a ``float`` (NumPy scalars are
+refused by the bindings, hence the conversion here).
+
 References
 ----------
 .. [1] Kainz, F., Bogart, R., Stanczyk, P., Hillman, P. "Technical Introduction
@@ -131,7 +138,7 @@ def _layer_channels(name: str, spec: LayerSpec, shape: tuple[int, int],
 
 def write_exr(path: str | os.PathLike, rgb, header: Mapping[str, object] | None = None,
               layers: Mapping[str, LayerSpec] | None = None, half: bool = True,
-              full_precision: Sequence[str] = ()) -> Path:
+              full_precision: Sequence[str] = (), attributes: Mapping[str, object] | None = None) -> Path:
     """Write a linear RGB image, metadata and optional layers to an OpenEXR file, atomically.
 
     Parameters
@@ -157,6 +164,11 @@ def write_exr(path: str | os.PathLike, rgb, header: Mapping[str, object] | None 
         Layers stored as float32 even when ``half`` is true; ``'rgb'`` names the
         colour channels (a golden reference keeps its mean in float32, its
         variances in half).
+    attributes : mapping of str to object, optional
+        Typed attributes stored under their own names, e.g. the OpenEXR standard
+        ``worldToCamera`` (float32 ``(4, 4)`` array: M44f), ``screenWindowCenter``
+        (float32 ``(2,)``: V2f) or ``nearClip`` (float). Names starting with
+        :data:`HEADER_PREFIX` or naming a structural attribute are refused.
 
     Returns
     -------
@@ -197,11 +209,31 @@ def write_exr(path: str | os.PathLike, rgb, header: Mapping[str, object] | None 
         if not isinstance(key, str) or not key:
             raise ValueError(f"header keys must be non-empty strings, got {key!r}")
         attrs[HEADER_PREFIX + key] = value if isinstance(value, str) else str(value)
+    for key, value in (attributes or {}).items():
+        if not isinstance(key, str) or not key or key.startswith(HEADER_PREFIX) or key in _STRUCTURAL - {
+                "screenWindowCenter", "screenWindowWidth"}:
+            raise ValueError(f"attribute name {key!r} is reserved or empty")
+        attrs[key] = _typed(key, value)
     exr = OpenEXR.File(attrs, channels)
     path = Path(path)
     with atomic_write(path, "wb") as f:
         exr.write(f)
     return path
+
+
+def _typed(key: str, value):
+    # The bindings pick the attribute type from the Python type: matrices and
+    # vectors must be float32 arrays of the right shape, scalars Python floats.
+    if isinstance(value, np.ndarray) or isinstance(value, (list, tuple)):
+        a = np.ascontiguousarray(value, np.float32)
+        if a.shape not in ((4, 4), (2,), (3,)):
+            raise ValueError(f"attribute {key!r}: arrays must be 4x4, 2 or 3 long, got shape {a.shape}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"attribute {key!r} is not finite: {a}")
+        return a
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating, str)):
+        raise ValueError(f"attribute {key!r} has unsupported type {type(value).__name__}")
+    return value if isinstance(value, str) else float(value)
 
 
 def _header_strings(raw: Mapping[str, object]) -> dict[str, str]:

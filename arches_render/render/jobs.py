@@ -28,7 +28,7 @@ from ..backend import set_variant
 from ..scene import load_scene, paths
 from .renderer import build_scene, render_layers, set_pixel_spread
 
-__all__ = ["RenderJob", "run_job", "clear_cache", "scene_inputs"]
+__all__ = ["RenderJob", "run_job", "clear_cache", "scene_inputs", "sensor_clip", "job_clip"]
 
 _CACHE: "OrderedDict[tuple, tuple]" = OrderedDict()
 _CACHE_SIZE = 4
@@ -186,6 +186,27 @@ def set_camera(scene, origin, target, up, fov) -> None:
     params["sensor.x_fov"] = float(fov)
     params.update()
     set_pixel_spread(scene, float(fov))
+
+
+def sensor_clip(scene) -> tuple[float, float]:
+    """``(near, far)`` clip distances of a built scene's sensor, metres (for the EXR header)."""
+    params = mi.traverse(scene.sensors()[0])
+    return float(params["near_clip"]), float(params["far_clip"])
+
+
+def job_clip(job: RenderJob) -> tuple[float, float]:
+    """``(near, far)`` of the sensor ``job`` renders through (:func:`sensor_clip`).
+
+    The planes depend on the scene only (its box, meshes included: see
+    :func:`arches_render.render.renderer.clip_planes`), not on the job's camera,
+    crop or stream, so the scene built for the whole image answers for every
+    frame and tile. That scene comes from this process's cache: free after a
+    serial render, one scene build (no render) where the pixels came from Dask
+    workers.
+    """
+    set_variant()
+    _, scene = _scene_for(job.with_(crop=None, stream=0))
+    return sensor_clip(scene)
 
 
 def run_job(job: RenderJob, progress=None):

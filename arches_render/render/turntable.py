@@ -39,7 +39,7 @@ from .. import faults
 from .aovs import BASE_LAYERS
 from .denoise import denoise as oidn
 from .distributed import map_jobs
-from .jobs import RenderJob, run_job
+from .jobs import RenderJob, job_clip, run_job
 from .output import is_complete, render_header, write_render
 
 __all__ = ["FIRST_FRAME", "orbit_camera", "frame_path", "TurntablePlan", "plan_turntable",
@@ -155,7 +155,9 @@ def _write_frame(plan: TurntablePlan, k: int, result, denoise: bool) -> Path:
     denoised = None
     if denoise:
         denoised = oidn(rgb, layers["albedo"][0], layers["normal"][0])
-    return write_render(plan.paths[k], rgb, layers, plan.headers[k], denoised)
+    # The clip planes come from the scene, known once built: at write time, not
+    # at plan time (a resumed turntable with nothing left to do builds nothing).
+    return write_render(plan.paths[k], rgb, layers, plan.headers[k], denoised, clip=job_clip(plan.jobs[k]))
 
 
 def render_turntable(plan: TurntablePlan, denoise: bool = False, client=None, progress=None,
