@@ -4,6 +4,7 @@
 
 This file holds the foundation's benchmarks, ``bench_production.py`` the
 production ones (turntables, Dask), ``bench_heightfield.py`` the heightfield cast,
+``bench_lookdev.py`` the gallery's cost and the look's,
 ``bench_tracing.py`` the direct tracer's (level of detail, pruning). Each generator keeps its own in its package
 (``generators/NAME/benchmarks.py``), declared as ``BENCHMARKS = {name: (fn, repeat)}``
 with ``fn(repeat) -> dict(value, unit, baseline, baseline_is, ...)`` in the
@@ -44,6 +45,7 @@ import mitsuba as mi
 import numpy as np
 
 import bench_heightfield  # benchmarks/ is on sys.path as the script's folder
+import bench_lookdev
 import bench_production
 import bench_tracing
 from arches_render.render.renderer import build_scene
@@ -146,7 +148,7 @@ BENCHMARKS = {
 def all_benchmarks() -> dict:
     """The benchmarks above, the production ones and every generator's (the registry)."""
     core = {**BENCHMARKS, **bench_production.BENCHMARKS, **bench_heightfield.BENCHMARKS,
-            **bench_tracing.BENCHMARKS}
+            **bench_tracing.BENCHMARKS, **bench_lookdev.BENCHMARKS}
     return {**core, **extensions.benchmarks(core=core)}
 
 

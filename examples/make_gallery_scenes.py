@@ -22,7 +22,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from scipy.ndimage import gaussian_filter
+from scipy.ndimage import gaussian_filter, zoom
 
 import arches_render  # noqa: F401  (chooses the libLLVM before Dr.Jit loads)
 from arches_render.generators.terrain.amplify import amplify
@@ -181,7 +181,13 @@ def karst():
     """Fig. 17 (2019): sinkholes, tunnels and cave mouths in a mesa plateau, a few km across."""
     name = "fig17_karst"
     H, cell = crop_dem("eroded_mesas.npy", (40, 240), (60, 260), 15.0)
+    # Refined 3x by cubic spline interpolation (it passes through the DEM's samples): the
+    # implicit heightfield interpolates bilinearly, whose creases follow the cells, so a
+    # cliff diagonal to 15 m cells came out as a staircase of 15 m steps.
+    H, cell = zoom(H, 3, order=3).astype(np.float32), cell / 3
     doc, _ = amplified(name, H, cell, "karst", seed=17)
+    # A bare limestone plateau: no snow on its top (the relief is over the 300 m that turns it on).
+    doc["materials"]["landscape"]["overrides"]["snow.coverage"] = 0.0
     # An oblique aerial view over the plateau's south-western cliffs (lowest point at z = 0).
     camera = {"origin": [-1450.0, -1350.0, 480.0], "target": [-150.0, -100.0, 200.0], "fov": 50.0}
     doc = finish(doc, name, "Fig. 17 (Paris et al. 2019): karst tunnels opening as cave mouths "
@@ -302,7 +308,7 @@ def arch_bridge():
                  "whose river undercut the walls",
                  # From inside the gorge, below the rims, looking up its length at the span.
                  {"origin": [-21.0, -120.0, 36.0], "target": [0.0, 0.0, 52.0], "fov": 55.0},
-                 {"elevation": 22.0, "azimuth": -20.0},
+                 {"elevation": 40.0, "azimuth": -20.0},
                  {"haze": {"density": 0.0008, "height": 60.0}}, spp=16, max_depth=3)
     write(name, doc, "Gallery: Fig. 23 of Paris et al. 2019, arch bridge (examples/make_gallery_scenes.py)")
 
@@ -354,13 +360,20 @@ def floating_islands():
     # The islands float 300 m over a hazy valley floor: the ground disk goes down, the far
     # field (a continuation of the island's DEM) is dropped.
     doc.pop("far_field", None)
-    doc["meshes"] = [dict(m, translate=[0.0, 0.0, -300.0]) for m in doc.get("meshes", []) if m.get("shape") == "disk"]
+    # A grassy valley floor (its own material: the island's wet band would darken it).
+    doc["materials"]["valley"] = {"type": "triplanar", "preset": "terrain",
+                                  "overrides": {"sand.coverage": 0.0, "snow.coverage": 0.0,
+                                                "grass.height_min": -1000.0, "grass.height_max": 1000.0,
+                                                "grass.slope_max": 60.0}}
+    doc["meshes"] = [{"shape": "disk", "translate": [0.0, 0.0, -300.0], "scale": 60000.0, "material": "valley"}]
     doc["materials"].pop("water", None)
+    doc["materials"]["landscape"].pop("wetness", None)
+    (GALLERY / DATA / f"{name}.water.ply").unlink(missing_ok=True)
     doc = finish(doc, name, "Fig. 21 (Paris et al. 2019): floating islands, implicitized heightfields "
                  "with eroded strata and craggy undersides, over a hazy valley",
                  {"origin": [-250.0, -200.0, 75.0], "target": [30.0, 60.0, 15.0], "fov": 55.0},
                  {"elevation": 30.0, "azimuth": -60.0},
-                 {"haze": {"density": 0.0012, "height": 120.0}}, spp=16, max_depth=3)
+                 {"haze": {"density": 0.0012, "height": 120.0}}, spp=16, max_depth=3, exposure=0.5)
     write(name, doc, "Gallery: Fig. 21 of Paris et al. 2019, floating islands (examples/make_gallery_scenes.py)")
 
 

@@ -1,0 +1,95 @@
+"""Lookdev benchmarks: the gallery's cost, and what the look costs over a plain material.
+
+``lookdev_gallery_s``   seconds of the slowest gallery render (``examples/make_gallery.py``'s
+                        list: 1280x720 at each scene's spp, denoised, ACES view), each in
+                        a fresh process with an empty kernel cache (JIT included).
+                        Baseline: the goal, 600 s. Extra fields: every scene's seconds
+                        and spp, the load.
+``lookdev_cost_ratio``  seconds of ``scenes/gallery/every_generator.toml`` (320x180,
+                        16 spp, warm kernels) with its look (atmosphere, strata colours
+                        from the geology, cavity, wetness, histogram tiling, detail)
+                        over the same scene with plain triplanar materials (repeat
+                        tiling, no detail, strata, cavity or wetness) and no
+                        atmosphere, same run (the rock piles' preset material, which has
+                        no scene-level switch, is the same in both). Baseline: the goal, 1.3.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from arches_render import tomlfile
+from arches_render.generators.terrain.scene_writer import toml_text
+from arches_render.render.renderer import build_scene
+from arches_render.scene import load_scene
+from arches_render.timing import REPO, median_renders
+
+sys.path.insert(0, str(REPO / "examples"))
+import make_gallery  # noqa: E402  (the gallery's list of renders lives with the script that makes it)
+
+COMBINED = REPO / "scenes" / "gallery" / "every_generator.toml"
+LOOK_KEYS = ("strata", "cavity", "wetness", "masks")
+
+
+def bench_lookdev_gallery_s(repeat):
+    seconds, spps = {}, {}
+    load0 = os.getloadavg()[0]
+    with tempfile.TemporaryDirectory() as tmp:
+        for path, spp, resolution in make_gallery.gallery_renders():
+            home = Path(tmp) / f"home_{path.stem}"  # Dr.Jit caches kernels under $HOME/.drjit
+            home.mkdir()
+            args = [sys.executable, "-m", "arches_render.cli", "render", str(path), "-o",
+                    str(Path(tmp) / f"{path.stem}.exr"), "-q", "--denoise", "--view", "aces"]
+            args += ["--spp", str(spp)] if spp else []
+            args += ["--resolution", resolution] if resolution else []
+            t = time.perf_counter()
+            subprocess.run(args, cwd=REPO, env=dict(os.environ, HOME=str(home)), check=True,
+                           stdout=subprocess.DEVNULL)
+            seconds[path.stem] = round(time.perf_counter() - t, 1)
+            spps[path.stem] = spp or load_scene(path).render.spp
+    return dict(value=max(seconds.values()), unit="s", baseline=600.0, baseline_is="goal",
+                slowest=max(seconds, key=seconds.get), seconds=seconds, spp=spps,
+                load=round(0.5 * (load0 + os.getloadavg()[0]), 2), cold_kernel_cache=True)
+
+
+def plain_document(doc: dict) -> dict:
+    """``doc`` with plain triplanar materials and no atmosphere (the baseline of the cost ratio)."""
+    doc = dict(doc)
+    doc.pop("atmosphere", None)
+    materials = {}
+    for name, mat in doc.get("materials", {}).items():
+        if mat.get("type", "triplanar") == "triplanar":
+            mat = {k: v for k, v in mat.items() if k not in LOOK_KEYS}
+            mat.update(tiling="repeat", detail=False)
+        materials[name] = mat
+    doc["materials"] = materials
+    return doc
+
+
+def bench_lookdev_cost_ratio(repeat):
+    w, h, spp = 320, 180, 16
+    load0 = os.getloadavg()[0]
+    plain = plain_document(tomlfile.load(COMBINED))
+    # Beside the scene, so its data paths resolve; '_' keeps it out of the gallery.
+    fd, name = tempfile.mkstemp(prefix="_plain_", suffix=".toml", dir=COMBINED.parent)
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(toml_text(plain, "lookdev_cost_ratio baseline (benchmarks/bench_lookdev.py)"))
+        scenes = [build_scene(load_scene(p), "field", w, h) for p in (COMBINED, Path(name))]
+    finally:
+        os.unlink(name)
+    look, base = median_renders(scenes, spp, repeat)
+    return dict(value=look / base, unit="x", baseline=1.3, baseline_is="goal", look_s=look, plain_s=base,
+                scene=str(COMBINED.relative_to(REPO)), resolution=f"{w}x{h}", spp=spp,
+                load=round(0.5 * (load0 + os.getloadavg()[0]), 2))
+
+
+BENCHMARKS = {
+    "lookdev_gallery_s": (bench_lookdev_gallery_s, 1),
+    "lookdev_cost_ratio": (bench_lookdev_cost_ratio, 3),
+}
