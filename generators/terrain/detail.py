@@ -57,69 +57,16 @@ import math
 
 import numpy as np
 
-__all__ = ["NOISE_RMS", "default_precision", "octave_spectrum", "band_roughness", "detail_amplification"]
+__all__ = ["NOISE_RMS", "default_precision", "band_roughness", "detail_amplification"]
 
 #: RMS of the gradient noise off the lattice planes (measured on 2e6 random points: 0.253
 #: on z = 0, 0.270 in 3-D; the fBm's octaves are offset off the plane).
 NOISE_RMS = 0.26
-_WINDOW = 256
 
 
 def default_precision(cell_size: float) -> float:
     """``--precision`` default: 10 cm for DEMs of 2 m cells or finer, ``cell / 16`` otherwise."""
     return 0.1 if cell_size <= 2.0 else float(cell_size) / 16.0
-
-
-def octave_spectrum(heights, cell_size, window=_WINDOW):
-    """RMS height of the DEM per octave band of wavelength (Welch periodogram).
-
-    Parameters
-    ----------
-    heights : array_like
-        ``(ny, nx)`` elevations (m).
-    cell_size : float
-        Metres per cell.
-    window : int
-        Window edge in samples (smaller DEMs use one window of their size).
-
-    Returns
-    -------
-    (numpy.ndarray, numpy.ndarray)
-        Band centre wavelengths (m, geometric means of the band edges) and RMS (m)
-        for bands ``[2^k, 2^(k+1))`` cells, ``k = 1 ..``; empty when the DEM is
-        smaller than 8 x 8.
-    """
-    H = np.asarray(heights, np.float64)
-    ny, nx = H.shape
-    w = min(window, ny, nx)
-    if w < 8:
-        return np.zeros(0), np.zeros(0)
-    # Up to 16 windows spread over the tile.
-    js = np.linspace(0, ny - w, min(4, max(1, ny // w))).astype(int)
-    is_ = np.linspace(0, nx - w, min(4, max(1, nx // w))).astype(int)
-    han = np.outer(np.hanning(w), np.hanning(w))
-    norm = (han ** 2).sum()
-    y, x = np.mgrid[0:w, 0:w].astype(np.float64)
-    A = np.column_stack([np.ones(w * w), x.ravel(), y.ravel()])
-    P = np.zeros((w, w))
-    for j in js:
-        for i in is_:
-            z = H[j:j + w, i:i + w].ravel()
-            coef, *_ = np.linalg.lstsq(A, z, rcond=None)
-            r = (z - A @ coef).reshape(w, w)
-            P += np.abs(np.fft.fft2(r * han)) ** 2 / norm
-    P /= len(js) * len(is_)
-    f = np.hypot(*np.meshgrid(np.fft.fftfreq(w), np.fft.fftfreq(w), indexing="ij"))  # cycles per cell
-    lam_cells = np.where(f > 0, 1.0 / np.maximum(f, 1e-12), np.inf)
-    centres, rms = [], []
-    k = 1
-    while 2 ** (k + 1) <= w / 2:
-        band = (lam_cells >= 2 ** k) & (lam_cells < 2 ** (k + 1))
-        # Parseval: the mean power over all frequencies is the variance (per sample).
-        rms.append(math.sqrt(P[band].sum() / (w * w)))
-        centres.append(2 ** (k + 0.5) * float(cell_size))
-        k += 1
-    return np.array(centres), np.array(rms)
 
 
 def band_roughness(heights, cell_size, max_cells=64):
