@@ -6,7 +6,8 @@ package; nothing scans folders. The scene loader, the CLI and ``benchmarks/run.p
 iterate this registry, and the core names no generator anywhere else.
 
 A generator package ``arches_render.generators.NAME`` (folder ``generators/NAME/``)
-declares in its ``__init__.py``:
+declares in its ``extension.py`` (not its ``__init__.py``, which stays light so that
+a worker process importing one module of the package imports no more than it needs):
 
 ``NODE_TYPES``     ``{type: build(table, builder) -> Node}``: node types of ``[nodes.*]``
                    tables. ``table`` is a :class:`~arches_render.scene.validate.Table`,
@@ -63,11 +64,12 @@ def extensions() -> tuple[Extension, ...]:
     found = []
     for name in GENERATORS:
         module = importlib.import_module(f"arches_render.generators.{name}")
+        declared = importlib.import_module(f"arches_render.generators.{name}.extension")
         found.append(Extension(name=name, module=module,
-                               node_types=dict(getattr(module, "NODE_TYPES", {})),
-                               scene_tables=dict(getattr(module, "SCENE_TABLES", {})),
-                               commands=tuple(getattr(module, "COMMANDS", ())),
-                               benchmarks=dict(getattr(module, "BENCHMARKS", {}))))
+                               node_types=dict(getattr(declared, "NODE_TYPES", {})),
+                               scene_tables=dict(getattr(declared, "SCENE_TABLES", {})),
+                               commands=tuple(getattr(declared, "COMMANDS", ())),
+                               benchmarks=dict(getattr(declared, "BENCHMARKS", {}))))
     return tuple(found)
 
 

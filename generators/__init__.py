@@ -3,7 +3,7 @@
 One sub-package per paper; each builds nodes of :mod:`arches_render.field`,
 primitive arrays or meshes, and never evaluates geometry with code of its own.
 Each declares its scene node types, scene tables, commands and benchmarks in its
-``__init__.py`` for the registry (:mod:`arches_render.extensions`).
+``extension.py`` for the registry (:mod:`arches_render.extensions`).
 
 ==========================================  ===========  ====================================
 paper (``shared/papers/``)                  package      entry module (read first)

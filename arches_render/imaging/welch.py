@@ -64,7 +64,6 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.special import ndtri
-from scipy.stats import hypergeom
 
 from .compare import LUMINANCE_WEIGHTS
 
@@ -381,6 +380,9 @@ def _coverage_z(ref: PixelMoments, test: PixelMoments) -> np.ndarray:
     n_r, n_t = ref.n, test.n
     k_t = test.hits
     total = ref.hits + k_t
+    # On use: scipy.stats takes 0.6 s to import, and every render (and every worker
+    # process) imports this module for PixelMoments; only golden checks need the test.
+    from scipy.stats import hypergeom
     lower = hypergeom.cdf(k_t, n_r + n_t, total, n_t)
     upper = hypergeom.sf(k_t - 1, n_r + n_t, total, n_t)
     p = np.clip(2.0 * np.minimum(lower, upper), 0.0, 1.0)

@@ -5,12 +5,3 @@ fracture discs of a structure type, clusters, hull planes) replicated over a hos
 field (:mod:`.replication`, :mod:`.block_field`): the ``blocks`` node type
 (:mod:`.scene_nodes`) and the ``blocks`` command.
 """
-
-__all__ = ["NODE_TYPES", "SCENE_TABLES", "COMMANDS", "BENCHMARKS"]
-
-from . import benchmarks, command
-from .scene_nodes import NODE_TYPES
-
-SCENE_TABLES: dict = {}
-COMMANDS = (command,)
-BENCHMARKS = benchmarks.BENCHMARKS

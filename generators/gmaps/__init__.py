@@ -22,12 +22,3 @@ module              holds
 ``benchmarks``      bytes per dart, events per second
 ==================  ==========================================================
 """
-
-__all__ = ["NODE_TYPES", "SCENE_TABLES", "COMMANDS", "BENCHMARKS"]
-
-from . import benchmarks, command
-
-NODE_TYPES: dict = {}
-SCENE_TABLES: dict = {}
-COMMANDS = (command,)
-BENCHMARKS = benchmarks.BENCHMARKS

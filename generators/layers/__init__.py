@@ -6,12 +6,3 @@ editing tools sculpt, sweep, deposit and erode (:mod:`.operations`): the
 ``layers`` and ``layers_ratio`` node types (:mod:`.scene_nodes`) and the
 ``layers`` command.
 """
-
-__all__ = ["NODE_TYPES", "SCENE_TABLES", "COMMANDS", "BENCHMARKS"]
-
-from . import benchmarks, command
-from .scene_nodes import NODE_TYPES
-
-SCENE_TABLES: dict = {}
-COMMANDS = (command,)
-BENCHMARKS = benchmarks.BENCHMARKS

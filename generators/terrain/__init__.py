@@ -7,13 +7,3 @@ the surface (Sec. 7); :mod:`.far_field` continues a heightfield tile to the hori
 (the ``[[far_field]]`` scene table). Entry points: :func:`.amplify.amplify` and the presets of :mod:`.presets`; the
 ``amplify`` command; node types in :mod:`.scene_nodes`.
 """
-
-__all__ = ["NODE_TYPES", "SCENE_TABLES", "COMMANDS", "BENCHMARKS"]
-
-from . import benchmarks, command
-from .far_field import parse_far_field
-from .scene_nodes import NODE_TYPES
-
-SCENE_TABLES = {"far_field": parse_far_field}
-COMMANDS = (command,)
-BENCHMARKS = benchmarks.BENCHMARKS

@@ -1,0 +1,18 @@
+"""What the ``rocks`` generator adds to arches-render (:mod:`arches_render.extensions`).
+
+Kept out of the package's ``__init__`` so that importing one of its modules
+(a worker process unpickling a task, a script) does not import the CLI, the
+scene loader and the benchmarks with it.
+"""
+
+from __future__ import annotations
+
+__all__ = ["NODE_TYPES", "SCENE_TABLES", "COMMANDS", "BENCHMARKS"]
+
+from . import benchmarks, command
+from .scene_piles import parse_rock_pile
+
+NODE_TYPES: dict = {}
+SCENE_TABLES = {"rock_piles": parse_rock_pile}
+COMMANDS = (command,)
+BENCHMARKS = benchmarks.BENCHMARKS

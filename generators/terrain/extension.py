@@ -1,0 +1,18 @@
+"""What the ``terrain`` generator adds to arches-render (:mod:`arches_render.extensions`).
+
+Kept out of the package's ``__init__`` so that importing one of its modules
+(a worker process unpickling a task, a script) does not import the CLI, the
+scene loader and the benchmarks with it.
+"""
+
+from __future__ import annotations
+
+__all__ = ["NODE_TYPES", "SCENE_TABLES", "COMMANDS", "BENCHMARKS"]
+
+from . import benchmarks, command
+from .far_field import parse_far_field
+from .scene_nodes import NODE_TYPES
+
+SCENE_TABLES = {"far_field": parse_far_field}
+COMMANDS = (command,)
+BENCHMARKS = benchmarks.BENCHMARKS
