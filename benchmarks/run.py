@@ -17,6 +17,13 @@ Figures (medians over ``--repeat`` runs, warm kernels unless stated):
                          displacement, transforms); baseline: the issue's goal, 80.
 ``field_evals_set10k``   M evals/s of a 10,000-capsule ``capsule_set`` through its
                          grid; baseline: the same capsules as a brute-force loop.
+``field_evals_scaling``  M evals/s of capsule sets of 10^4, 10^5 and 10^6 primitives at
+                         constant density (the set10k capsules over 200 x 200 m, the
+                         area growing with the count); value: the 10^6 rate over the
+                         10^4 rate, points in random order (every evaluation a cache
+                         miss); baseline: the goal, 0.5. Extra fields per size: rate,
+                         rate for the same points in cell order (as a tracer's coherent
+                         packets), build seconds (numba kernels warm), MB of the arrays.
 ``render_field_vs_mesh`` sphere-traced time / marching-cubes mesh time (stock
                          ``path``), default scene, same camera, spp and resolution;
                          baseline: the goal, 2. Extra fields: the field at full
@@ -102,6 +109,36 @@ def bench_field_evals_set10k(repeat):
                 goal=20.0, cells=int(np.prod(node.res)), max_per_cell=node.max_per_cell)
 
 
+def capsules_at_constant_density(n, seed=1):
+    """``n`` capsules at the density of ``field_evals_set10k`` (10^4 over 200 x 200 x 20 m)."""
+    s = np.sqrt(n / 10_000)
+    rng = np.random.default_rng(seed)
+    a = rng.uniform(-100, 100, (n, 3)) * [s, s, 0.1]
+    return a, a + rng.normal(0, 1.0, a.shape), rng.uniform(0.3, 1.2, n), s
+
+
+def bench_field_evals_scaling(repeat):
+    from arches_render.field.brick_grid import BrickGrid
+    F.CapsuleSet(*capsules_at_constant_density(100)[:3])  # loads the compiled grid kernels
+    out, m = {}, 1 << 21
+    for n, label in ((10_000, "10k"), (100_000, "100k"), (1_000_000, "1M")):
+        a, b, r, s = capsules_at_constant_density(n)
+        t = time.perf_counter()
+        node = F.CapsuleSet(a, b, r)
+        out[f"build_s_{label}"] = time.perf_counter() - t
+        out[f"MB_{label}"] = node.nbytes() / 1e6
+        pts = np.random.default_rng(0).uniform([-100 * s, -100 * s, -10], [100 * s, 100 * s, 10], (m, 3))
+        pts = pts.astype(np.float32)
+        coherent = pts[np.argsort(BrickGrid.cell_order(pts, node.grid_lo, node.cell, node.res), kind="stable")]
+        for order, p in (("", pts), ("coherent_", coherent)):
+            t = timed_eval(node.eval, mi.Point3f(*(mi.Float(p[:, i]) for i in range(3))), repeat)
+            out[f"{order}Mevals_{label}"] = m / t / 1e6
+        del node
+    return dict(value=out["Mevals_1M"] / out["Mevals_10k"], unit="x", baseline=0.5, baseline_is="goal",
+                coherent_ratio=out["coherent_Mevals_1M"] / out["coherent_Mevals_10k"], **out,
+                load=os.getloadavg()[0])
+
+
 def bench_render_field_vs_mesh(repeat):
     desc = load_scene(REPO / "scenes" / "default.toml")
     w, h, spp = 320, 180, 16
@@ -140,6 +177,7 @@ def bench_render_default_s(repeat):
 BENCHMARKS = {
     "field_evals_tree20": (bench_field_evals_tree20, 5),
     "field_evals_set10k": (bench_field_evals_set10k, 5),
+    "field_evals_scaling": (bench_field_evals_scaling, 3),
     "render_field_vs_mesh": (bench_render_field_vs_mesh, 3),
     "render_default_s": (bench_render_default_s, 1),
 }

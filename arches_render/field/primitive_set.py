@@ -38,7 +38,11 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from .brick_grid import BRICK, MAX_BRICKS, BrickGrid
 from .node import Node, box_distance, opaque_float
+
+#: Floats a capsule takes in the record array (a, b, r, padding to 32 bytes).
+CAPSULE_RECORD = 8
 
 
 def grid_lists(lo_boxes, hi_boxes, grid_lo, cell, res):
@@ -88,12 +92,13 @@ class CapsuleSet(Node):
     margin : float, optional
         The clamp ``m``; default one cell edge.
     max_cells : int
-        Upper bound on the number of cells.
+        Upper bound on the number of stored cells (8 bytes each); the cell edge
+        grows where a set would need more.
     """
 
     kind = "capsule_set"
 
-    def __init__(self, a, b, radius, cell_size=None, margin=None, max_cells=64 ** 3):
+    def __init__(self, a, b, radius, cell_size=None, margin=None, max_cells=1 << 23):
         a = np.asarray(a, dtype=np.float64).reshape(-1, 3)
         b = np.asarray(b, dtype=np.float64).reshape(-1, 3)
         r = np.broadcast_to(np.asarray(radius, dtype=np.float64), (len(a),)).copy()
@@ -102,62 +107,58 @@ class CapsuleSet(Node):
         if not np.all(r > 0):
             raise ValueError("capsule_set radii must be > 0")
         self.n = len(a)
+        self.a_np, self.b_np, self.r_np = a, b, r
         lo_p = np.minimum(a, b) - r[:, None]
         hi_p = np.maximum(a, b) + r[:, None]
         self.prim_lo, self.prim_hi = lo_p.min(axis=0), hi_p.max(axis=0)
         size = float(np.median((hi_p - lo_p).max(axis=1)))
         cell = float(cell_size) if cell_size else size
-        extent = self.prim_hi - self.prim_lo
-        # Keep the cell count bounded for sparse, large sets.
-        while np.prod(np.ceil((extent + 2 * cell) / cell) + 1) > max_cells:
+        # Cells as small as the primitives; coarser only where the stored bricks (or
+        # the top grid of bricks) would pass their limits: a huge, dense set.
+        while True:
+            m = float(margin) if margin else 0.5 * cell
+            grid_lo = self.prim_lo - m
+            res = np.maximum(np.ceil((self.prim_hi + m - grid_lo) / cell).astype(np.int64), 1)
+            if np.prod(-(-res // BRICK)) <= MAX_BRICKS:
+                stored = BrickGrid.stored_bricks(lo_p - m, hi_p + m, grid_lo, cell, res)
+                if int(stored.sum()) * BRICK ** 3 <= max_cells:
+                    break
             cell *= 1.25
-        m = float(margin) if margin else 0.5 * cell
         self.margin_np = m
-        grid_lo = self.prim_lo - m
-        res = np.maximum(np.ceil((self.prim_hi + m - grid_lo) / cell).astype(np.int64), 1)
+        # Primitives in the order of the cells of their centres: a cell's list then
+        # reads nearby memory (the field's value does not depend on the order).
+        centre = 0.5 * (lo_p + hi_p)
+        order = np.argsort(BrickGrid.cell_order(centre, grid_lo, cell, res), kind="stable")
+        a, b, r, lo_p, hi_p = a[order], b[order], r[order], lo_p[order], hi_p[order]
+        self.grid = BrickGrid(lo_p - m, hi_p + m, lo_p, hi_p, grid_lo, cell, res, stored)
         self.grid_lo, self.cell, self.res = grid_lo, cell, res
         self.grid_hi = grid_lo + res * cell
-        start, count, index = grid_lists(lo_p - m, hi_p + m, grid_lo, cell, res)
-        self._empty = mi.Float(empty_distance(lo_p, hi_p, grid_lo, cell, res).astype(np.float32))
-        self.max_per_cell = int(count.max())
-        self.list_len = len(index)
-        self._start, self._count, self._index = mi.UInt32(start), mi.UInt32(count), mi.UInt32(index)
-        f32 = lambda x: mi.Float(np.ascontiguousarray(x, dtype=np.float32))  # noqa: E731
-        self._ax, self._ay, self._az = f32(a[:, 0]), f32(a[:, 1]), f32(a[:, 2])
-        self._bx, self._by, self._bz = f32(b[:, 0]), f32(b[:, 1]), f32(b[:, 2])
-        self._r = f32(r)
+        self.max_per_cell, self.list_len = self.grid.max_per_cell, self.grid.list_len
+        # One record of 8 floats (a, b, r, unused) a capsule: a list entry then costs
+        # one cache line, not seven (the arrays of a large set do not fit in caches).
+        records = np.zeros((self.n, CAPSULE_RECORD), dtype=np.float32)
+        records[:, 0:3], records[:, 3:6], records[:, 6] = a, b, r
+        self._records = mi.Float(records.reshape(-1))
         self._m = opaque_float(m)
         self._glo = [opaque_float(v) for v in grid_lo]
         self._ghi = [opaque_float(v) for v in self.grid_hi]
-        self._inv_cell = opaque_float(1.0 / cell)
-        self.a_np, self.b_np, self.r_np = a, b, r
-
-    def _cell(self, p):
-        rx, ry, rz = (int(v) for v in self.res)
-        ix = mi.UInt32(dr.clip((p.x - self._glo[0]) * self._inv_cell, 0.0, rx - 1.0))
-        iy = mi.UInt32(dr.clip((p.y - self._glo[1]) * self._inv_cell, 0.0, ry - 1.0))
-        iz = mi.UInt32(dr.clip((p.z - self._glo[2]) * self._inv_cell, 0.0, rz - 1.0))
-        return (iz * ry + iy) * rx + ix
 
     def eval_bounds(self, p, levels, direction=None, footprint=None):
         f = self.eval(p)
-        empty = dr.gather(mi.Float, self._empty, self._cell(p))
+        empty = self.grid.empty_distance(p)
         return f, tuple(dr.maximum(dr.maximum(-f - c, 0.0), empty - c) for c in levels)
 
     def eval(self, p):
-        cell = self._cell(p)
-        start = dr.gather(mi.UInt32, self._start, cell)
-        count = dr.gather(mi.UInt32, self._count, cell)
+        start, count = self.grid.cell_list(p)
+        index = self.grid.index
 
         def body(i, f):
-            k = dr.gather(mi.UInt32, self._index, start + i)
-            a = mi.Point3f(dr.gather(mi.Float, self._ax, k), dr.gather(mi.Float, self._ay, k),
-                           dr.gather(mi.Float, self._az, k))
-            ba = mi.Vector3f(dr.gather(mi.Float, self._bx, k), dr.gather(mi.Float, self._by, k),
-                             dr.gather(mi.Float, self._bz, k)) - a
-            pa = p - a
+            k = dr.gather(mi.UInt32, index, start + i) * CAPSULE_RECORD
+            field = [dr.gather(mi.Float, self._records, k + j) for j in range(7)]
+            a = mi.Point3f(*field[0:3])
+            pa, ba = p - a, mi.Point3f(*field[3:6]) - a
             t = dr.clip(dr.dot(pa, ba) / dr.maximum(dr.squared_norm(ba), 1e-20), 0.0, 1.0)
-            d = dr.gather(mi.Float, self._r, k) - dr.norm(pa - ba * t)
+            d = field[6] - dr.norm(pa - ba * t)
             return i + 1, dr.maximum(f, d)
 
         _, inside = dr.while_loop((mi.UInt32(0), -self._m + mi.Float(0.0)),
@@ -180,4 +181,4 @@ class CapsuleSet(Node):
         return 1.0
 
     def nbytes(self):
-        return 64 + self.n * 7 * 4 + int(np.prod(self.res)) * 8 + self.list_len * 4
+        return 64 + self.n * CAPSULE_RECORD * 4 + self.grid.nbytes()

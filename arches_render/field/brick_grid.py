@@ -1,0 +1,193 @@
+"""A sparse two-level grid over primitive boxes: bricks of 8^3 cells, stored where occupied.
+
+A uniform grid over a large primitive set either has few cells (many primitives
+per cell: a point loops over hundreds) or many (memory for every empty cell of the
+air above a terrain). Here a dense *top* grid of bricks holds, per brick, a slot
+number or ``NO_SLOT``; only bricks that some primitive's box touches store their
+``8^3`` cells (CSR list offsets and an empty-space bound). A point finds
+its cell with one more gather than in a dense grid::
+
+    brick = top[(iz >> 3, iy >> 3, ix >> 3)]        # slot or NO_SLOT
+    cell  = brick * 512 + ((iz & 7) * 8 + (iy & 7)) * 8 + (ix & 7)
+
+so cells can stay as small as the primitives at any set size: a million capsules
+at the density of ten thousand cost the same per evaluation (the lists are built
+by a counting sort, :mod:`.brick_grid_kernels`).
+
+Empty space. For each stored cell, a lower bound of the distance from its points
+to the primitives' boxes: ``(k - sqrt(3)) * cell`` with ``k`` the centre-to-centre
+distance (in cells) to the nearest cell a box touches (a Euclidean distance
+transform); for an unstored brick, the same at brick scale. The transform runs on
+the whole fine grid while it is small (``DENSE_EDT_CELLS``: the bound is then the
+exact one of a dense grid); beyond, each stored brick is transformed on its own and
+the bound also capped by the distance to the brick's faces (anything nearer than
+that lies inside the brick).
+
+References
+----------
+Museth, K. (2013). VDB: High-resolution sparse volumes with dynamic topology. ACM
+TOG 32(3) (a shallow tree of dense leaf bricks of 8^3 voxels).
+Danielsson, P.-E. (1980). Euclidean distance mapping. CGIP 14 (the distance
+transform; ``scipy.ndimage.distance_transform_edt``).
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from .node import opaque_float
+
+__all__ = ["BrickGrid", "BRICK", "DENSE_EDT_CELLS", "MAX_BRICKS"]
+
+#: Cells along a brick's edge (a power of two: cell -> brick is a shift).
+BRICK = 8
+BRICK_CELLS = BRICK ** 3
+#: The slot of a brick that holds no cell.
+NO_SLOT = np.uint32(0xFFFFFFFF)
+
+#: Fine grids up to this many cells get the exact (dense) distance transform.
+DENSE_EDT_CELLS = 1 << 22
+#: The top grid's size limit (4 bytes a brick).
+MAX_BRICKS = 1 << 21
+
+
+def cell_ranges(lo, hi, grid_lo, cell, res):
+    """Inclusive cell index ranges ``(i0, i1)`` of boxes ``[lo, hi]`` (clipped to the grid)."""
+    i0 = np.clip(np.floor((lo - grid_lo) / cell).astype(np.int64), 0, res - 1)
+    i1 = np.clip(np.floor((hi - grid_lo) / cell).astype(np.int64), 0, res - 1)
+    return i0, i1
+
+
+class BrickGrid:
+    """Cells of edge ``cell`` from ``grid_lo``, ``res`` per axis, stored in bricks of 8^3.
+
+    Parameters
+    ----------
+    list_lo, list_hi : numpy.ndarray
+        ``(N, 3)`` boxes that put a primitive on a cell's list (e.g. grown by a margin).
+    occupied_lo, occupied_hi : numpy.ndarray
+        ``(N, 3)`` boxes holding the primitives (the empty-space bound's targets),
+        inside the list boxes.
+    grid_lo : numpy.ndarray
+        ``(3,)`` corner of the grid.
+    cell : float
+        Cell edge.
+    res : numpy.ndarray
+        ``(3,)`` cells per axis.
+    bricks_occupied : numpy.ndarray, optional
+        The result of :meth:`stored_bricks` for these arguments, if already computed.
+    """
+
+    def __init__(self, list_lo, list_hi, occupied_lo, occupied_hi, grid_lo, cell, res, bricks_occupied=None):
+        from . import brick_grid_kernels as K  # on use: numba is slow to import
+
+        self.grid_lo, self.cell = np.asarray(grid_lo, dtype=np.float64), float(cell)
+        self.res = np.asarray(res, dtype=np.int64)
+        self.bricks = -(-self.res // BRICK)
+        i0, i1 = cell_ranges(list_lo, list_hi, self.grid_lo, self.cell, self.res)
+        occupied = K.mark_bricks(i0, i1, self.bricks) if bricks_occupied is None else bricks_occupied
+        slots = np.full(len(occupied), NO_SLOT, dtype=np.uint32)
+        slots[occupied] = np.arange(int(occupied.sum()), dtype=np.uint32)
+        n_cells = int(occupied.sum()) * BRICK_CELLS
+        count = K.count_cells(i0, i1, slots, self.bricks, n_cells)
+        # CSR offsets, one more than cells: a list is [offset[c], offset[c + 1]).
+        offset = np.zeros(n_cells + 1, dtype=np.uint32)
+        np.cumsum(count, out=offset[1:])
+        index = K.fill_cells(i0, i1, slots, self.bricks, offset, int(offset[-1]))
+        o0, o1 = cell_ranges(occupied_lo, occupied_hi, self.grid_lo, self.cell, self.res)
+        touched = K.count_cells(o0, o1, slots, self.bricks, n_cells) > 0
+        empty, brick_empty = self._empty_bounds(touched, occupied, slots)
+        self.slots_np, self.offset_np, self.index_np = slots, offset, index
+        self.stored_cells, self.list_len = n_cells, len(index)
+        self.max_per_cell = int(count.max()) if n_cells else 0
+        self._slots, self._offset = mi.UInt32(slots), mi.UInt32(offset)
+        self.index = mi.UInt32(index)  # read by the owner's loop over a list
+        self._empty, self._brick_empty = mi.Float(empty), mi.Float(brick_empty)
+        self._glo = [opaque_float(v) for v in self.grid_lo]
+        self._inv_cell = opaque_float(1.0 / self.cell)
+
+    @staticmethod
+    def stored_bricks(list_lo, list_hi, grid_lo, cell, res) -> np.ndarray:
+        """Which bricks a grid of these arguments would store (bool per brick, z-major)."""
+        from . import brick_grid_kernels as K  # on use: numba is slow to import
+        res = np.asarray(res, dtype=np.int64)
+        i0, i1 = cell_ranges(list_lo, list_hi, np.asarray(grid_lo, dtype=np.float64), float(cell), res)
+        return K.mark_bricks(i0, i1, -(-res // BRICK))
+
+    def _empty_bounds(self, touched, stored, slots):
+        """Per stored cell and per brick, a lower bound of the distance to the touched cells."""
+        # on use: keeps `import arches_render.field` light
+        from scipy.ndimage import distance_transform_edt
+
+        bx, by, bz = (int(v) for v in self.bricks)
+        per_brick = touched.reshape(-1, BRICK, BRICK, BRICK)  # (slot, z, y, x)
+        if int(np.prod(self.res)) <= DENSE_EDT_CELLS:
+            dense = np.zeros((bz, by, bx, BRICK, BRICK, BRICK), dtype=bool)
+            dense.reshape(-1, BRICK, BRICK, BRICK)[stored] = per_brick
+            dense = dense.transpose(0, 3, 1, 4, 2, 5).reshape(bz * BRICK, by * BRICK, bx * BRICK)
+            bound = np.maximum(distance_transform_edt(~dense) - np.sqrt(3.0), 0.0) * self.cell
+            bricked = bound.reshape(bz, BRICK, by, BRICK, bx, BRICK).transpose(0, 2, 4, 1, 3, 5)
+            bricked = bricked.reshape(-1, BRICK, BRICK, BRICK)
+            return (bricked[stored].reshape(-1).astype(np.float32),
+                    bricked.min(axis=(1, 2, 3)).astype(np.float32))
+        # Large grids: each stored brick on its own, with the chessboard distance
+        # (|d|_inf <= |d|_2, so the bound stays a lower one; separable, compiled) capped
+        # by the distance to the brick's faces, beyond which the brick-scale bound
+        # takes over. The exact transform took 2.9 s on the 6 M stored cells of a
+        # million capsules.
+        from .brick_grid_kernels import chessboard_in_bricks
+        local = np.arange(BRICK)
+        to_face = np.minimum(local + 1, BRICK - local)
+        face = np.minimum(np.minimum(to_face[:, None, None], to_face[None, :, None]), to_face[None, None, :])
+        k = np.minimum(chessboard_in_bricks(per_brick), face).astype(np.float64)
+        cell_bound = np.maximum(k - np.sqrt(3.0), 0.0) * self.cell
+        brick_touched = np.zeros(len(slots), dtype=bool)
+        brick_touched[stored] = per_brick.any(axis=(1, 2, 3))
+        kb = distance_transform_edt(~brick_touched.reshape(bz, by, bx)).reshape(-1)
+        brick_bound = np.maximum(kb - np.sqrt(3.0), 0.0) * BRICK * self.cell
+        # A stored brick that no primitive itself touches (only grown boxes) keeps its
+        # brick-scale bound where that is the larger.
+        cell_bound = np.maximum(cell_bound, brick_bound[stored][:, None, None, None])
+        return cell_bound.reshape(-1).astype(np.float32), brick_bound.astype(np.float32)
+
+    @staticmethod
+    def cell_order(points, grid_lo, cell, res) -> np.ndarray:
+        """A sort key of points: the brick of their cell, then the cell in the brick."""
+        res = np.asarray(res, dtype=np.int64)
+        i = np.clip(np.floor((points - grid_lo) / cell).astype(np.int64), 0, res - 1)
+        bricks = -(-res // BRICK)
+        brick = ((i[:, 2] // BRICK) * bricks[1] + i[:, 1] // BRICK) * bricks[0] + i[:, 0] // BRICK
+        return brick * BRICK_CELLS + ((i[:, 2] % BRICK) * BRICK + i[:, 1] % BRICK) * BRICK + i[:, 0] % BRICK
+
+    def lookup(self, p):
+        """``(cell, stored, brick)`` of the points ``p``: the stored cell index (valid where
+        ``stored``) and the brick's index in the top grid."""
+        rx, ry, rz = (int(v) for v in self.res)
+        bx, by = int(self.bricks[0]), int(self.bricks[1])
+        ix = mi.UInt32(dr.clip((p.x - self._glo[0]) * self._inv_cell, 0.0, rx - 1.0))
+        iy = mi.UInt32(dr.clip((p.y - self._glo[1]) * self._inv_cell, 0.0, ry - 1.0))
+        iz = mi.UInt32(dr.clip((p.z - self._glo[2]) * self._inv_cell, 0.0, rz - 1.0))
+        brick = ((iz >> 3) * by + (iy >> 3)) * bx + (ix >> 3)
+        slot = dr.gather(mi.UInt32, self._slots, brick)
+        stored = slot != int(NO_SLOT)
+        cell = slot * BRICK_CELLS + (((iz & 7) << 6) | ((iy & 7) << 3) | (ix & 7))
+        return cell, stored, brick
+
+    def cell_list(self, p):
+        """``(start, count)`` of the list of the cell holding ``p`` (count 0 in unstored bricks)."""
+        cell, stored, _ = self.lookup(p)
+        # Both offsets usually share a cache line: no separate count array to miss in.
+        start = dr.gather(mi.UInt32, self._offset, cell, stored)
+        return start, dr.gather(mi.UInt32, self._offset, cell + 1, stored) - start
+
+    def empty_distance(self, p):
+        """A lower bound of the distance from ``p`` to the occupied boxes (0 near them)."""
+        cell, stored, brick = self.lookup(p)
+        return dr.select(stored, dr.gather(mi.Float, self._empty, cell, stored),
+                         dr.gather(mi.Float, self._brick_empty, brick, ~stored))
+
+    def nbytes(self) -> int:
+        """Bytes of the grid's arrays (top slots and bounds, per cell offset and bound, lists)."""
+        return len(self.slots_np) * 8 + self.stored_cells * 8 + self.list_len * 4
