@@ -22,6 +22,9 @@ a worker process importing one module of the package imports no more than it nee
                    :func:`arches_render.mesh.usd_export.write_usd_stage`).
 ``COMMANDS``       modules defining ``register(subparsers)``: ``arches-render``
                    subcommands (see :mod:`arches_render.commands`).
+and in its ``benchmarks.py`` (imported by :func:`benchmarks` only: a render or a
+worker process does not need them):
+
 ``BENCHMARKS``     ``{name: (fn(repeat) -> dict, default repeat)}``: figures of
                    ``benchmarks/run.py``.
 
@@ -50,7 +53,6 @@ class Extension:
     node_types: dict
     scene_tables: dict
     commands: tuple
-    benchmarks: dict
 
 
 @functools.cache
@@ -68,31 +70,29 @@ def extensions() -> tuple[Extension, ...]:
         found.append(Extension(name=name, module=module,
                                node_types=dict(getattr(declared, "NODE_TYPES", {})),
                                scene_tables=dict(getattr(declared, "SCENE_TABLES", {})),
-                               commands=tuple(getattr(declared, "COMMANDS", ())),
-                               benchmarks=dict(getattr(declared, "BENCHMARKS", {}))))
+                               commands=tuple(getattr(declared, "COMMANDS", ()))))
     return tuple(found)
 
 
-def _merged(kind: str, taken=()) -> dict:
-    """``{name: value}`` of one declaration over every extension; duplicates raise."""
+def _merged(what: str, declared, taken=()) -> dict:
+    """``{name: value}`` over ``(generator, {name: value})`` pairs; a name defined twice raises."""
     out = {}
-    for ext in extensions():
-        for name, value in getattr(ext, kind).items():
+    for generator, items in declared:
+        for name, value in items.items():
             if name in out or name in taken:
-                raise RuntimeError(f"{kind[:-1].replace('_', ' ')} {name!r} of generators.{ext.name} "
-                                   "is already defined")
+                raise RuntimeError(f"{what} {name!r} of generators.{generator} is already defined")
             out[name] = value
     return out
 
 
 def node_types(core=()) -> dict:
     """Node types of every generator; ``core`` names those the scene loader defines itself."""
-    return _merged("node_types", core)
+    return _merged("node type", ((ext.name, ext.node_types) for ext in extensions()), core)
 
 
 def scene_tables() -> dict:
     """Top-level scene tables of every generator, e.g. ``{'rock_piles': parse_rock_pile}``."""
-    return _merged("scene_tables")
+    return _merged("scene table", ((ext.name, ext.scene_tables) for ext in extensions()))
 
 
 def commands() -> list:
@@ -102,4 +102,5 @@ def commands() -> list:
 
 def benchmarks(core=()) -> dict:
     """Benchmarks of every generator; ``core`` names those ``benchmarks/run.py`` defines itself."""
-    return _merged("benchmarks", core)
+    return _merged("benchmark", ((ext.name, importlib.import_module(
+        f"arches_render.generators.{ext.name}.benchmarks").BENCHMARKS) for ext in extensions()), core)

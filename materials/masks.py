@@ -67,7 +67,6 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 import numpy as np
-from skimage.filters import threshold_multiotsu
 
 from ..field.node import evaluate
 
@@ -149,6 +148,7 @@ def strata_levels(node, box, count: int, samples: int = 20000, seed: int = 0) ->
     P = np.random.default_rng(seed).uniform(lo, hi, (int(samples), 3))
     rho = np.clip(evaluate(node, P).astype(np.float64), 0.0, 1.0)
     try:
+        from skimage.filters import threshold_multiotsu  # on use: skimage.filters takes 0.4 s to import
         levels = [float(v) for v in threshold_multiotsu(rho, classes=count)]
     except ValueError:  # fewer distinct values than classes
         levels = []

@@ -2,16 +2,16 @@
 
 Kept out of the package's ``__init__`` so that importing one of its modules
 (a worker process unpickling a task, a script) does not import the CLI, the
-scene loader and the benchmarks with it.
+scene loader with it. Benchmarks stay in ``benchmarks.py`` (``BENCHMARKS``), imported
+only by ``benchmarks/run.py``.
 """
 
 from __future__ import annotations
 
-__all__ = ["NODE_TYPES", "SCENE_TABLES", "COMMANDS", "BENCHMARKS"]
+__all__ = ["NODE_TYPES", "SCENE_TABLES", "COMMANDS"]
 
-from . import benchmarks, command
+from . import command
 from .scene_nodes import NODE_TYPES
 
 SCENE_TABLES: dict = {}
 COMMANDS = (command,)
-BENCHMARKS = benchmarks.BENCHMARKS

@@ -2,17 +2,17 @@
 
 Kept out of the package's ``__init__`` so that importing one of its modules
 (a worker process unpickling a task, a script) does not import the CLI, the
-scene loader and the benchmarks with it.
+scene loader with it. Benchmarks stay in ``benchmarks.py`` (``BENCHMARKS``), imported
+only by ``benchmarks/run.py``.
 """
 
 from __future__ import annotations
 
-__all__ = ["NODE_TYPES", "SCENE_TABLES", "COMMANDS", "BENCHMARKS"]
+__all__ = ["NODE_TYPES", "SCENE_TABLES", "COMMANDS"]
 
-from . import benchmarks, command
+from . import command
 from .scene_piles import parse_rock_pile
 
 NODE_TYPES: dict = {}
 SCENE_TABLES = {"rock_piles": parse_rock_pile}
 COMMANDS = (command,)
-BENCHMARKS = benchmarks.BENCHMARKS
