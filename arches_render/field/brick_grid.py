@@ -39,7 +39,7 @@ import numpy as np
 
 from .node import opaque_float
 
-__all__ = ["BrickGrid", "BRICK", "DENSE_EDT_CELLS", "MAX_BRICKS"]
+__all__ = ["BrickGrid", "BrickLayout", "BRICK", "DENSE_EDT_CELLS", "MAX_BRICKS"]
 
 #: Cells along a brick's edge (a power of two: cell -> brick is a shift).
 BRICK = 8
@@ -58,6 +58,88 @@ def cell_ranges(lo, hi, grid_lo, cell, res):
     i0 = np.clip(np.floor((lo - grid_lo) / cell).astype(np.int64), 0, res - 1)
     i1 = np.clip(np.floor((hi - grid_lo) / cell).astype(np.int64), 0, res - 1)
     return i0, i1
+
+
+class BrickLayout:
+    """Which bricks of a grid are stored, and where: the top level of a brick grid.
+
+    Parameters
+    ----------
+    slots : numpy.ndarray
+        ``(bricks,)`` uint32, z-major: the brick's slot among the stored ones, or
+        ``NO_SLOT``.
+    grid_lo : numpy.ndarray
+        ``(3,)`` corner of the grid.
+    cell : float
+        Cell edge.
+    res : numpy.ndarray
+        ``(3,)`` cells per axis.
+    """
+
+    def __init__(self, slots, grid_lo, cell, res):
+        self.slots_np = np.asarray(slots, dtype=np.uint32)
+        self.grid_lo, self.cell = np.asarray(grid_lo, dtype=np.float64), float(cell)
+        self.res = np.asarray(res, dtype=np.int64)
+        self.bricks = -(-self.res // BRICK)
+        self.stored = self.slots_np != NO_SLOT
+        self.stored_cells = int(self.stored.sum()) * BRICK_CELLS
+        self._slots = mi.UInt32(self.slots_np)
+        self._glo = [opaque_float(v) for v in self.grid_lo]
+        self._inv_cell = opaque_float(1.0 / self.cell)
+
+    @classmethod
+    def of_cells(cls, nonzero, grid_lo, cell, res) -> "BrickLayout":
+        """The layout storing every brick that holds a ``True`` cell of ``nonzero``
+        (a dense ``(z, y, x)``-ordered flat array of ``prod(res)`` cells)."""
+        bricked = cls._bricked(np.asarray(nonzero, dtype=bool), res, False)
+        occupied = bricked.any(axis=(1, 2, 3))
+        slots = np.full(len(occupied), NO_SLOT, dtype=np.uint32)
+        slots[occupied] = np.arange(int(occupied.sum()), dtype=np.uint32)
+        return cls(slots, grid_lo, cell, res)
+
+    @staticmethod
+    def _bricked(dense, res, fill):
+        """A dense ``(z, y, x)`` flat array as ``(brick, z, y, x)`` blocks (padded with ``fill``)."""
+        rx, ry, rz = (int(v) for v in res)
+        bx, by, bz = (-(-int(v) // BRICK) for v in res)
+        padded = np.full((bz * BRICK, by * BRICK, bx * BRICK), fill, dtype=dense.dtype)
+        padded[:rz, :ry, :rx] = dense.reshape(rz, ry, rx)
+        blocks = padded.reshape(bz, BRICK, by, BRICK, bx, BRICK).transpose(0, 2, 4, 1, 3, 5)
+        return blocks.reshape(-1, BRICK, BRICK, BRICK)
+
+    def compact(self, dense) -> np.ndarray:
+        """The stored cells' entries of a dense ``(z, y, x)`` flat per-cell array."""
+        dense = np.asarray(dense)
+        return np.ascontiguousarray(self._bricked(dense, self.res, 0)[self.stored].reshape(-1))
+
+    def brick_min(self, dense) -> np.ndarray:
+        """Per brick, the smallest entry of a dense per-cell array over the brick's cells."""
+        dense = np.asarray(dense)
+        return self._bricked(dense, self.res, np.inf).min(axis=(1, 2, 3))
+
+    def cell_coordinates(self, p):
+        """``(fx, fy, fz)``: ``p`` in cell units from the grid's corner (``mi.Float``)."""
+        return tuple((p[i] - self._glo[i]) * self._inv_cell for i in range(3))
+
+    def lookup(self, p):
+        """``(cell, stored, brick)`` of the points ``p``: the stored cell index (valid where
+        ``stored``) and the brick's index in the top grid (points outside the grid
+        take the nearest cell)."""
+        rx, ry, rz = (int(v) for v in self.res)
+        bx, by = int(self.bricks[0]), int(self.bricks[1])
+        fx, fy, fz = self.cell_coordinates(p)
+        ix = mi.UInt32(dr.clip(fx, 0.0, rx - 1.0))
+        iy = mi.UInt32(dr.clip(fy, 0.0, ry - 1.0))
+        iz = mi.UInt32(dr.clip(fz, 0.0, rz - 1.0))
+        brick = ((iz >> 3) * by + (iy >> 3)) * bx + (ix >> 3)
+        slot = dr.gather(mi.UInt32, self._slots, brick)
+        stored = slot != int(NO_SLOT)
+        cell = slot * BRICK_CELLS + (((iz & 7) << 6) | ((iy & 7) << 3) | (ix & 7))
+        return cell, stored, brick
+
+    def nbytes(self) -> int:
+        """Bytes of the top grid."""
+        return len(self.slots_np) * 4
 
 
 class BrickGrid:
@@ -102,11 +184,10 @@ class BrickGrid:
         self.slots_np, self.offset_np, self.index_np = slots, offset, index
         self.stored_cells, self.list_len = n_cells, len(index)
         self.max_per_cell = int(count.max()) if n_cells else 0
-        self._slots, self._offset = mi.UInt32(slots), mi.UInt32(offset)
+        self.layout = BrickLayout(slots, self.grid_lo, self.cell, self.res)
+        self._offset = mi.UInt32(offset)
         self.index = mi.UInt32(index)  # read by the owner's loop over a list
         self._empty, self._brick_empty = mi.Float(empty), mi.Float(brick_empty)
-        self._glo = [opaque_float(v) for v in self.grid_lo]
-        self._inv_cell = opaque_float(1.0 / self.cell)
 
     @staticmethod
     def stored_bricks(list_lo, list_hi, grid_lo, cell, res) -> np.ndarray:
@@ -161,30 +242,16 @@ class BrickGrid:
         brick = ((i[:, 2] // BRICK) * bricks[1] + i[:, 1] // BRICK) * bricks[0] + i[:, 0] // BRICK
         return brick * BRICK_CELLS + ((i[:, 2] % BRICK) * BRICK + i[:, 1] % BRICK) * BRICK + i[:, 0] % BRICK
 
-    def lookup(self, p):
-        """``(cell, stored, brick)`` of the points ``p``: the stored cell index (valid where
-        ``stored``) and the brick's index in the top grid."""
-        rx, ry, rz = (int(v) for v in self.res)
-        bx, by = int(self.bricks[0]), int(self.bricks[1])
-        ix = mi.UInt32(dr.clip((p.x - self._glo[0]) * self._inv_cell, 0.0, rx - 1.0))
-        iy = mi.UInt32(dr.clip((p.y - self._glo[1]) * self._inv_cell, 0.0, ry - 1.0))
-        iz = mi.UInt32(dr.clip((p.z - self._glo[2]) * self._inv_cell, 0.0, rz - 1.0))
-        brick = ((iz >> 3) * by + (iy >> 3)) * bx + (ix >> 3)
-        slot = dr.gather(mi.UInt32, self._slots, brick)
-        stored = slot != int(NO_SLOT)
-        cell = slot * BRICK_CELLS + (((iz & 7) << 6) | ((iy & 7) << 3) | (ix & 7))
-        return cell, stored, brick
-
     def cell_list(self, p):
         """``(start, count)`` of the list of the cell holding ``p`` (count 0 in unstored bricks)."""
-        cell, stored, _ = self.lookup(p)
+        cell, stored, _ = self.layout.lookup(p)
         # Both offsets usually share a cache line: no separate count array to miss in.
         start = dr.gather(mi.UInt32, self._offset, cell, stored)
         return start, dr.gather(mi.UInt32, self._offset, cell + 1, stored) - start
 
     def empty_distance(self, p):
         """A lower bound of the distance from ``p`` to the occupied boxes (0 near them)."""
-        cell, stored, brick = self.lookup(p)
+        cell, stored, brick = self.layout.lookup(p)
         return dr.select(stored, dr.gather(mi.Float, self._empty, cell, stored),
                          dr.gather(mi.Float, self._brick_empty, brick, ~stored))
 

@@ -81,6 +81,7 @@ import numpy as np
 from arches_render.field.lod import OctaveLOD
 from arches_render.field.node import Node, box_distance, opaque_float
 from arches_render.field.noise import fbm, fbm_lipschitz, fbm_range
+from arches_render.field.brick_grid import BrickLayout
 from arches_render.field.primitive_set import empty_distance, grid_lists
 
 from .falloff import G_SLOPE, g_dr
@@ -221,14 +222,27 @@ class SkeletalSet(Node):
         # large holds the steepest point of some falloff anyway).
         self.local_radius = SLOPE_REACH * cell
         slope = grid_lists(lo_p - self.local_radius, hi_p + self.local_radius, self.grid_lo, cell, res)
-        self._slope_lists = tuple(mi.UInt32(v) for v in slope)
+        # Cells are stored in bricks of 8^3, only where some per-cell datum is not 0
+        # (empty bricks read 0 and list nothing, as their cells held): along a coast
+        # most of the box is air or rock that no primitive reaches.
+        cell_L = self.cell_lipschitz_np.astype(np.float32) * np.float32(1.0 + 1e-6)
+        cell_M = self.cell_value_max_np.astype(np.float32) * np.float32(1.0 + 1e-6)
+        nonzero = (count > 0) | (slope[1] > 0) | (cell_L > 0) | (cell_M > 0)
+        near = empty = None
+        if self.value_max > 0:
+            empty = empty_distance(lo_p, hi_p, self.grid_lo, cell, res).astype(np.float32)
+            near = grid_lists(lo_p - cell, hi_p + cell, self.grid_lo, cell, res)
+            nonzero |= near[1] > 0
+        self.layout = BrickLayout.of_cells(nonzero, self.grid_lo, cell, res)
+        compact = self.layout.compact
+        self._slope_lists = (mi.UInt32(compact(slope[0])), mi.UInt32(compact(slope[1])), mi.UInt32(slope[2]))
         self.slope_len = len(slope[2])
         self._empty = self._near = None
         self.near_len = 0
-        if self.value_max > 0:
-            self._empty = mi.Float(empty_distance(lo_p, hi_p, self.grid_lo, cell, res).astype(np.float32))
-            near = grid_lists(lo_p - cell, hi_p + cell, self.grid_lo, cell, res)
-            self._near = tuple(mi.UInt32(v) for v in near)
+        if near is not None:
+            self._empty = mi.Float(compact(empty))
+            self._brick_empty = mi.Float(self.layout.brick_min(empty).astype(np.float32))
+            self._near = (mi.UInt32(compact(near[0])), mi.UInt32(compact(near[1])), mi.UInt32(near[2]))
             self.near_len = len(near[2])
             self._reach_R = mi.Float(np.ascontiguousarray(R * (1.0 + span), dtype=np.float32))
             if self.noise:
@@ -239,21 +253,20 @@ class SkeletalSet(Node):
             self._support_lo = [opaque_float(v) for v in self.support_lo]
             self._support_hi = [opaque_float(v) for v in self.support_hi]
             self._peak = opaque_float(self.value_max * (1.0 + 1e-6))  # float32 e may round up
-        self._cell_L = mi.Float(self.cell_lipschitz_np.astype(np.float32) * np.float32(1.0 + 1e-6))
-        self._cell_M = mi.Float(self.cell_value_max_np.astype(np.float32) * np.float32(1.0 + 1e-6))
+        self._cell_L, self._cell_M = mi.Float(compact(cell_L)), mi.Float(compact(cell_M))
+        del self.cell_lipschitz_np, self.cell_value_max_np  # dense: only their stored cells are kept
         self._cell_edge = opaque_float(cell)
 
         f32 = lambda x: mi.Float(np.ascontiguousarray(x, dtype=np.float32))  # noqa: E731
-        self._start, self._count, self._index = mi.UInt32(start), mi.UInt32(count), mi.UInt32(index)
+        self._start, self._count = mi.UInt32(compact(start)), mi.UInt32(compact(count))
+        self._index = mi.UInt32(index)
         self._ax, self._ay, self._az = (f32(a[:, i]) for i in range(3))
         self._bax, self._bay, self._baz = (f32(b[:, i] - a[:, i]) for i in range(3))
         self._inv_len2 = f32(1.0 / np.maximum(np.sum((b - a) ** 2, axis=1), 1e-30))
         self._R, self._e, self._core = f32(R), f32(e), f32(c)
         self._group = mi.UInt32(grp.astype(np.uint32))
-        self._glo = [opaque_float(v) for v in self.grid_lo]
         self._glo_box = ([opaque_float(v) for v in self.grid_lo],
                          [opaque_float(v) for v in self.grid_lo + cell * res])
-        self._inv_cell = opaque_float(1.0 / cell)
         self._threshold = opaque_float(self.threshold_np)
         if self.noise:
             nz = self.noise
@@ -350,19 +363,22 @@ class SkeletalSet(Node):
         return 3.0 + per * min(self.max_per_cell, 8)
 
     def nbytes(self):
-        per_cell = 24 + (12 if self._near is not None else 0)  # start, count, L, M, slope, [empty, near]
+        # Per stored cell: start, count, L, M, slope start and count, [empty, near start and count].
+        per_cell = 24 + (12 if self._near is not None else 0)
         near = (self.near_len + self.slope_len) * 4 + self.n * 4 * (2 if self._near is not None else 1)
-        return 64 + self.n * 12 * 4 + int(np.prod(self.res)) * per_cell + self.list_len * 4 + near
+        return (64 + self.n * 12 * 4 + self.layout.stored_cells * per_cell + self.layout.nbytes()
+                + self.list_len * 4 + near)
 
     # -- evaluation ---------------------------------------------------------------
     def _cell(self, p):
+        """``(cell, stored, brick, inside)``: the stored cell of ``p`` (valid where
+        ``stored``; elsewhere every per-cell datum is 0), its brick, and whether ``p``
+        lies in the grid."""
         rx, ry, rz = (int(v) for v in self.res)
-        fx, fy, fz = ((p[i] - self._glo[i]) * self._inv_cell for i in range(3))
+        fx, fy, fz = self.layout.cell_coordinates(p)
         inside = ((fx >= 0) & (fy >= 0) & (fz >= 0) & (fx < rx) & (fy < ry) & (fz < rz))
-        ix = mi.UInt32(dr.clip(fx, 0.0, rx - 1.0))
-        iy = mi.UInt32(dr.clip(fy, 0.0, ry - 1.0))
-        iz = mi.UInt32(dr.clip(fz, 0.0, rz - 1.0))
-        return (iz * ry + iy) * rx + ix, inside
+        cell, stored, brick = self.layout.lookup(p)
+        return cell, stored, brick, inside
 
     def _falloff(self, p, k, geometry=False, level=None):
         """``g(d~)`` of primitive ``k`` at ``p`` (a value in [0, 1]); with ``geometry``,
@@ -417,9 +433,9 @@ class SkeletalSet(Node):
         level = self._lod.level(footprint) if self.noise else None
         rate = footprint.rate if level is not None else None
         start_a, count_a, index_a = lists
-        cell, inside = self._cell(p)
-        start = dr.gather(mi.UInt32, start_a, cell)
-        count = dr.select(inside, dr.gather(mi.UInt32, count_a, cell), 0)
+        cell, stored, _, inside = self._cell(p)
+        start = dr.gather(mi.UInt32, start_a, cell, stored)
+        count = dr.select(inside, dr.gather(mi.UInt32, count_a, cell, stored), 0)
         n_u = len(us)
 
         def visit(k, ds):
@@ -484,8 +500,8 @@ class SkeletalSet(Node):
         """``(L, M, r)``: within the ball of radius ``r`` (one cell edge) around ``p``,
         ``|grad F| <= L`` and ``F <= M`` (maxima over the 3x3x3 cells around ``p``'s
         cell, which hold that ball; 0 far from every primitive)."""
-        cell, _ = self._cell(p)
-        return (dr.gather(mi.Float, self._cell_L, cell), dr.gather(mi.Float, self._cell_M, cell),
+        cell, stored, _, _ = self._cell(p)
+        return (dr.gather(mi.Float, self._cell_L, cell, stored), dr.gather(mi.Float, self._cell_M, cell, stored),
                 self._cell_edge)
 
     def eval_bounds(self, p, levels, direction=None, footprint=None):
@@ -515,8 +531,8 @@ class SkeletalSet(Node):
             f = self._accumulate(p, (self._start, self._count, self._index), (), footprint)[0] - self._threshold
         else:
             f = self.eval(p)
-        cell, inside = self._cell(p)
-        L, r = dr.gather(mi.Float, self._cell_L, cell), self._cell_edge  # (local_lipschitz)
+        cell, stored, brick, inside = self._cell(p)
+        L, r = dr.gather(mi.Float, self._cell_L, cell, stored), self._cell_edge  # (local_lipschitz)
         L_glob = self.lipschitz
         if footprint is not None:
             grow = 1.0 + self.lod_kappa * footprint.rate
@@ -539,7 +555,8 @@ class SkeletalSet(Node):
             # positive energy, so {F >= u} is empty for every u > 0.
             ds = [dr.select(u > 0.0, FAR, dr.select(u < 0.0, dr.maximum(d, g), d)) for d, g, u in zip(ds, geo, us)]
         elif us:
-            empty = dr.gather(mi.Float, self._empty, cell)
+            empty = dr.select(stored, dr.gather(mi.Float, self._empty, cell, stored),
+                              dr.gather(mi.Float, self._brick_empty, brick, ~stored))
             outside = box_distance(p, self._support_lo, self._support_hi)
             # A primitive left out of the near list is at least one cell edge away.
             geo = [dr.select(inside, dr.maximum(dr.minimum(dr.maximum(g, 0.0), self._cell_edge), empty),
