@@ -3,7 +3,8 @@
     python benchmarks/run.py [--json] [--repeat N] [NAME ...]
 
 This file holds the foundation's benchmarks, ``bench_production.py`` the
-production ones (turntables, Dask), ``bench_heightfield.py`` the heightfield cast,
+production ones (turntables, Dask), ``bench_dask_scale.py`` Dask at scale
+(a tiled 1280x720 still, a 24-frame turntable), ``bench_heightfield.py`` the heightfield cast,
 ``bench_lookdev.py`` the gallery's cost and the look's,
 ``bench_tracing.py`` the direct tracer's (level of detail, pruning). Each generator keeps its own in its package
 (``generators/NAME/benchmarks.py``), declared as ``BENCHMARKS = {name: (fn, repeat)}``
@@ -51,6 +52,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+import bench_dask_scale
 import bench_heightfield  # benchmarks/ is on sys.path as the script's folder
 import bench_lookdev
 import bench_production
@@ -185,7 +187,7 @@ BENCHMARKS = {
 
 def all_benchmarks() -> dict:
     """The benchmarks above, the production ones and every generator's (the registry)."""
-    core = {**BENCHMARKS, **bench_production.BENCHMARKS, **bench_heightfield.BENCHMARKS,
+    core = {**BENCHMARKS, **bench_production.BENCHMARKS, **bench_dask_scale.BENCHMARKS, **bench_heightfield.BENCHMARKS,
             **bench_tracing.BENCHMARKS, **bench_lookdev.BENCHMARKS}
     return {**core, **extensions.benchmarks(core=core)}
 

@@ -14,6 +14,27 @@ worker *processes* (Dr.Jit's LLVM backend and Mitsuba's scene state are per
 process) with one thread each; ``scheduler`` connects to an existing cluster
 instead (``tcp://host:8786``).
 
+Threads: Dr.Jit starts one thread per core in every process, so N workers on one
+host would run N x cores threads. :func:`map_jobs` gives every job
+``cores // (worker processes on its host)`` Dr.Jit threads (at least 1; cores as
+Dask counts them, CPU affinity and cgroup limits included), and a process runs one
+job at a time whatever its Dask thread count. :func:`drjit_threads` reports what
+each worker uses.
+
+A cluster of several machines (every host sees the scene files, and the files they
+name, at the same absolute path; outputs are written by the client only)::
+
+    host0$ dask scheduler                                  # listens on tcp://host0:8786
+    hostN$ dask worker tcp://host0:8786 --nworkers 1 --nthreads 1   # on every render host
+    client$ arches-render render SCENE --tiles 64 --scheduler tcp://host0:8786
+    client$ arches-render turntable SCENE -o DIR --scheduler tcp://host0:8786
+
+One worker process per host with one Dask thread lets Dr.Jit use all of the host's
+cores for each job; ``--nworkers K`` splits them K ways (more jobs in flight, each
+slower: useful when the client's writing or the scene builds are the bottleneck).
+Every worker compiles its kernels once into its own ``~/.drjit`` (tens of seconds
+a kernel); a new tile size or position, and a new camera, is a new kernel.
+
 References
 ----------
 Rocklin, M. (2015). Dask: parallel computation with blocked algorithms and task
@@ -35,7 +56,8 @@ from ..imaging.golden import update_golden
 from .jobs import RenderJob, run_job
 from .renderer import moments_of
 
-__all__ = ["dask_client", "map_jobs", "tile_grid", "render_tiled", "regenerate_goldens"]
+__all__ = ["dask_client", "map_jobs", "tile_grid", "render_tiled", "regenerate_goldens", "drjit_threads",
+           "warm_workers"]
 
 
 @contextlib.contextmanager
@@ -70,16 +92,47 @@ def dask_client(scheduler: str | None = None, workers: int | None = None) -> Ite
         yield client
 
 
+def _cores() -> int:
+    # Dask's count honours CPU affinity and cgroup quotas; os.cpu_count() does not.
+    from dask.system import CPU_COUNT
+    return int(CPU_COUNT or os.cpu_count() or 1)
+
+
 def _threads_per_worker(client) -> int:
     # Dr.Jit would start one thread per core in every worker process; split the
     # cores of each host between its workers instead (the fewest over hosts).
     info = client.scheduler_info().get("workers", {})
-    cores = client.run(os.cpu_count)  # {worker address: cores of its host}
+    cores = client.run(_cores)  # {worker address: cores of its host}
     hosts: dict[str, int] = {}
     for w in info.values():
         hosts[w.get("host", "")] = hosts.get(w.get("host", ""), 0) + 1
     per = [int(cores.get(addr) or 1) // hosts[w.get("host", "")] for addr, w in info.items()]
     return max(1, min(per, default=1))
+
+
+def _drjit_thread_count():
+    import sys
+    # None where no job ran yet: importing Dr.Jit here would report its default.
+    dr = sys.modules.get("drjit")
+    return int(dr.thread_count()) if dr is not None else None
+
+
+def drjit_threads(client) -> dict:
+    """Dr.Jit threads of every worker process: ``{worker address: threads or None}``.
+
+    ``None`` for a worker that has not imported Dr.Jit (it ran no job yet).
+    """
+    return client.run(_drjit_thread_count)
+
+
+def _import_renderer():
+    from ..backend import set_variant
+    set_variant()
+
+
+def warm_workers(client) -> None:
+    """Import Mitsuba and choose its variant in every worker (seconds a worker, once)."""
+    client.run(_import_renderer)
 
 
 def map_jobs(client, jobs: Sequence[RenderJob], keys: Sequence | None = None):

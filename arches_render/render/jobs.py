@@ -15,6 +15,7 @@ re-uses the compiled kernels.
 from __future__ import annotations
 
 import hashlib
+import threading
 from collections import OrderedDict
 from dataclasses import dataclass, field as dc_field, replace
 from pathlib import Path
@@ -32,6 +33,11 @@ __all__ = ["RenderJob", "run_job", "clear_cache", "scene_inputs", "sensor_clip",
 
 _CACHE: "OrderedDict[tuple, tuple]" = OrderedDict()
 _CACHE_SIZE = 4
+# One job at a time per process: a Dask worker with several threads (``dask worker``
+# defaults to one per core) would otherwise render two frames at once through the
+# same cached scene, one moving the other's camera; Dr.Jit's own threads already use
+# the cores.
+_RUN_LOCK = threading.Lock()
 
 
 @dataclass(frozen=True)
@@ -225,10 +231,11 @@ def run_job(job: RenderJob, progress=None):
         (see :func:`arches_render.render.renderer.render_layers`).
     """
     set_variant()
-    if job.threads:
-        dr.set_thread_count(int(job.threads))
-    desc, scene = _scene_for(job)
-    cam = job.camera or (desc.camera.origin, desc.camera.target, desc.camera.up, desc.camera.fov)
-    set_camera(scene, *cam)
-    rgb, layers = render_layers(scene, job.spp, job.seed, job.passes, progress, stream=job.stream)
+    with _RUN_LOCK:
+        if job.threads:
+            dr.set_thread_count(int(job.threads))
+        desc, scene = _scene_for(job)
+        cam = job.camera or (desc.camera.origin, desc.camera.target, desc.camera.up, desc.camera.fov)
+        set_camera(scene, *cam)
+        rgb, layers = render_layers(scene, job.spp, job.seed, job.passes, progress, stream=job.stream)
     return np.ascontiguousarray(rgb), layers
