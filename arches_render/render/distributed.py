@@ -32,8 +32,11 @@ name, at the same absolute path; outputs are written by the client only)::
 One worker process per host with one Dask thread lets Dr.Jit use all of the host's
 cores for each job; ``--nworkers K`` splits them K ways (more jobs in flight, each
 slower: useful when the client's writing or the scene builds are the bottleneck).
-Every worker compiles its kernels once into its own ``~/.drjit`` (tens of seconds
-a kernel); a new tile size or position, and a new camera, is a new kernel.
+Every host compiles its kernels once into its own ``~/.drjit`` (about 10 s a kernel
+on two cores). A new camera is a parameter edit (no new kernel: a turntable compiles
+once per worker); a new tile size or position is a new kernel, since Mitsuba's render
+loop takes the film's crop offset as a constant (measured: 11 s of compilation per
+tile of a 2 x 2 tiling, 13 ms per turntable frame after the first).
 
 References
 ----------
