@@ -147,8 +147,9 @@ class BrickGrid:
 
     Parameters
     ----------
-    list_lo, list_hi : numpy.ndarray
-        ``(N, 3)`` boxes that put a primitive on a cell's list (e.g. grown by a margin).
+    list_i0, list_i1 : numpy.ndarray
+        ``(N, 3)`` inclusive cell ranges (:func:`cell_ranges`) that put a primitive on a
+        cell's list (its box grown by a margin, say).
     occupied_lo, occupied_hi : numpy.ndarray
         ``(N, 3)`` boxes holding the primitives (the empty-space bound's targets),
         inside the list boxes.
@@ -159,16 +160,16 @@ class BrickGrid:
     res : numpy.ndarray
         ``(3,)`` cells per axis.
     bricks_occupied : numpy.ndarray, optional
-        The result of :meth:`stored_bricks` for these arguments, if already computed.
+        The result of :meth:`stored_bricks` for these ranges, if already computed.
     """
 
-    def __init__(self, list_lo, list_hi, occupied_lo, occupied_hi, grid_lo, cell, res, bricks_occupied=None):
+    def __init__(self, list_i0, list_i1, occupied_lo, occupied_hi, grid_lo, cell, res, bricks_occupied=None):
         from . import brick_grid_kernels as K  # on use: numba is slow to import
 
         self.grid_lo, self.cell = np.asarray(grid_lo, dtype=np.float64), float(cell)
         self.res = np.asarray(res, dtype=np.int64)
         self.bricks = -(-self.res // BRICK)
-        i0, i1 = cell_ranges(list_lo, list_hi, self.grid_lo, self.cell, self.res)
+        i0, i1 = list_i0, list_i1
         occupied = K.mark_bricks(i0, i1, self.bricks) if bricks_occupied is None else bricks_occupied
         slots = np.full(len(occupied), NO_SLOT, dtype=np.uint32)
         slots[occupied] = np.arange(int(occupied.sum()), dtype=np.uint32)
@@ -190,12 +191,10 @@ class BrickGrid:
         self._empty, self._brick_empty = mi.Float(empty), mi.Float(brick_empty)
 
     @staticmethod
-    def stored_bricks(list_lo, list_hi, grid_lo, cell, res) -> np.ndarray:
-        """Which bricks a grid of these arguments would store (bool per brick, z-major)."""
+    def stored_bricks(list_i0, list_i1, res) -> np.ndarray:
+        """Which bricks a grid of these list ranges would store (bool per brick, z-major)."""
         from . import brick_grid_kernels as K  # on use: numba is slow to import
-        res = np.asarray(res, dtype=np.int64)
-        i0, i1 = cell_ranges(list_lo, list_hi, np.asarray(grid_lo, dtype=np.float64), float(cell), res)
-        return K.mark_bricks(i0, i1, -(-res // BRICK))
+        return K.mark_bricks(list_i0, list_i1, -(-np.asarray(res, dtype=np.int64) // BRICK))
 
     def _empty_bounds(self, touched, stored, slots):
         """Per stored cell and per brick, a lower bound of the distance to the touched cells."""

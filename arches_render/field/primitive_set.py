@@ -38,7 +38,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .brick_grid import BRICK, MAX_BRICKS, BrickGrid
+from .brick_grid import BRICK, MAX_BRICKS, BrickGrid, cell_ranges
 from .node import Node, box_distance, opaque_float
 
 #: Floats a capsule takes in the record array (a, b, r, padding to 32 bytes).
@@ -120,7 +120,8 @@ class CapsuleSet(Node):
             grid_lo = self.prim_lo - m
             res = np.maximum(np.ceil((self.prim_hi + m - grid_lo) / cell).astype(np.int64), 1)
             if np.prod(-(-res // BRICK)) <= MAX_BRICKS:
-                stored = BrickGrid.stored_bricks(lo_p - m, hi_p + m, grid_lo, cell, res)
+                i0, i1 = cell_ranges(lo_p - m, hi_p + m, grid_lo, cell, res)
+                stored = BrickGrid.stored_bricks(i0, i1, res)
                 if int(stored.sum()) * BRICK ** 3 <= max_cells:
                     break
             cell *= 1.25
@@ -130,7 +131,7 @@ class CapsuleSet(Node):
         centre = 0.5 * (lo_p + hi_p)
         order = np.argsort(BrickGrid.cell_order(centre, grid_lo, cell, res), kind="stable")
         a, b, r, lo_p, hi_p = a[order], b[order], r[order], lo_p[order], hi_p[order]
-        self.grid = BrickGrid(lo_p - m, hi_p + m, lo_p, hi_p, grid_lo, cell, res, stored)
+        self.grid = BrickGrid(i0[order], i1[order], lo_p, hi_p, grid_lo, cell, res, stored)
         self.grid_lo, self.cell, self.res = grid_lo, cell, res
         self.grid_hi = grid_lo + res * cell
         self.max_per_cell, self.list_len = self.grid.max_per_cell, self.grid.list_len
