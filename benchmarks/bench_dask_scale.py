@@ -22,8 +22,8 @@ assembling and writing, idle workers at the end), ``dispatch_gap_ms`` (median ga
 on one worker between a task's end and its next task's start),
 ``compute_s_per_task`` (in the workers) and ``bitwise_equal`` (every pixel of the
 beauty and every layer equal between the two runs). With 4 spp and two cores the
-whole benchmark takes about 3 minutes once kernels are cached; a first run on a
-machine compiles about 20 kernels (10 s each). Figures are noisy when other
+whole benchmark takes a few minutes once kernels are cached (before tiles became
+off-axis cameras, each tile compiled its own kernel, 10 s each). Figures are noisy when other
 processes share the machine: the result carries the load average.
 """
 

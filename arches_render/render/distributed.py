@@ -33,10 +33,12 @@ One worker process per host with one Dask thread lets Dr.Jit use all of the host
 cores for each job; ``--nworkers K`` splits them K ways (more jobs in flight, each
 slower: useful when the client's writing or the scene builds are the bottleneck).
 Every host compiles its kernels once into its own ``~/.drjit`` (about 10 s a kernel
-on two cores). A new camera is a parameter edit (no new kernel: a turntable compiles
-once per worker); a new tile size or position is a new kernel, since Mitsuba's render
-loop takes the film's crop offset as a constant (measured: 11 s of compilation per
-tile of a 2 x 2 tiling, 13 ms per turntable frame after the first).
+on two cores). A new camera and a new tile window are parameter edits: a tile renders
+through an off-axis camera with the tile's film
+(:func:`~arches_render.render.renderer.tile_projection`), not through a crop of the
+full film, whose offset Mitsuba's render loop compiles in (that cost 11 s of
+compilation per tile of a 2 x 2 tiling; now 0.13 s a tile after the first, as a
+turntable frame).
 
 References
 ----------

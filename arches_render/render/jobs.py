@@ -27,7 +27,7 @@ import numpy as np
 from .. import tomlfile
 from ..backend import set_variant
 from ..scene import load_scene, paths
-from .renderer import build_scene, render_layers, set_pixel_spread
+from .renderer import build_scene, render_layers, set_pixel_spread, tile_projection
 
 __all__ = ["RenderJob", "run_job", "clear_cache", "scene_inputs", "sensor_clip", "job_clip"]
 
@@ -123,7 +123,9 @@ def prime_cache(job: RenderJob, desc, scene) -> None:
 
 def _key(job: RenderJob) -> tuple:
     path = Path(job.scene).resolve()
-    return (str(path), scene_inputs(path), job.width, job.height, job.geometry, job.aovs, job.moments, job.crop,
+    # Tiles of one size share a scene: run_job points its camera at each window.
+    window = None if job.crop is None else tuple(int(v) for v in job.crop[2:])
+    return (str(path), scene_inputs(path), job.width, job.height, job.geometry, job.aovs, job.moments, window,
             job.voxel, job.allow)
 
 
@@ -183,15 +185,26 @@ def _named_files(value, base: Path):
             pass  # not a path this system can name
 
 
-def set_camera(scene, origin, target, up, fov) -> None:
-    """Move a built scene's camera (a parameter edit: no kernel is recompiled)."""
+def set_camera(scene, origin, target, up, fov, image=None) -> None:
+    """Move a built scene's camera (a parameter edit: no kernel is recompiled).
+
+    ``image = (width, height, crop)``: the scene renders the window ``crop`` of a
+    ``width x height`` image (its film is the window's size, see
+    :func:`arches_render.render.renderer.tile_projection`); ``crop`` may be ``None``.
+    """
     params = mi.traverse(scene)
     params["sensor.to_world"] = mi.AffineTransform4f(
         mi.ScalarTransform4f().look_at(origin=[float(v) for v in origin],
                                        target=[float(v) for v in target], up=[float(v) for v in up]))
-    params["sensor.x_fov"] = float(fov)
+    x_fov, offset, width = float(fov), (0.0, 0.0), None
+    if image is not None and image[2] is not None:
+        width = int(image[0])
+        x_fov, *offset = tile_projection(fov, image[0], image[1], image[2])
+    params["sensor.x_fov"] = x_fov
+    params["sensor.principal_point_offset_x"] = float(offset[0])
+    params["sensor.principal_point_offset_y"] = float(offset[1])
     params.update()
-    set_pixel_spread(scene, float(fov))
+    set_pixel_spread(scene, float(fov), width)
 
 
 def sensor_clip(scene) -> tuple[float, float]:
@@ -236,6 +249,6 @@ def run_job(job: RenderJob, progress=None):
             dr.set_thread_count(int(job.threads))
         desc, scene = _scene_for(job)
         cam = job.camera or (desc.camera.origin, desc.camera.target, desc.camera.up, desc.camera.fov)
-        set_camera(scene, *cam)
+        set_camera(scene, *cam, image=(job.width, job.height, job.crop))
         rgb, layers = render_layers(scene, job.spp, job.seed, job.passes, progress, stream=job.stream)
     return np.ascontiguousarray(rgb), layers

@@ -72,23 +72,46 @@ def scene_box(desc, bbox=None) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
+def tile_projection(fov, width, height, crop) -> tuple[float, float, float]:
+    """``(x_fov, offset_x, offset_y)`` of a camera whose ``w x h`` film sees exactly the
+    window ``crop = (x0, y0, w, h)`` of a ``width x height`` image of horizontal field
+    of view ``fov`` (degrees).
+
+    An off-axis sub-frustum: ``tan(x_fov / 2) = tan(fov / 2) w / width`` (the same angle
+    a pixel), and the principal point moves to the window's centre, in units of the
+    window (Mitsuba's ``principal_point_offset``):
+    ``offset_x = (x0 + w/2 - width/2) / w``, ``offset_y = (y0 + h/2 - height/2) / h``.
+    Why not the film's crop window: Mitsuba's render loop takes the crop offset as a
+    constant, so every tile compiled its own kernel (11 s each on two cores); these are
+    parameters (ray directions agree with the crop's to 6e-8).
+    """
+    x0, y0, w, h = (int(v) for v in crop)
+    half = math.tan(math.radians(float(fov)) / 2.0) * w / int(width)
+    return (2.0 * math.degrees(math.atan(half)), (x0 + 0.5 * w - 0.5 * int(width)) / w,
+            (y0 + 0.5 * h - 0.5 * int(height)) / h)
+
+
 def sensor_dict(desc, width, height, crop=None) -> dict:
-    """Perspective camera of the scene; ``crop = (x0, y0, w, h)`` renders a window only.
+    """Perspective camera of the scene; ``crop = (x0, y0, w, h)`` renders a window only
+    (:func:`tile_projection`).
 
     Clip planes come from :func:`clip_planes` of the field and the cameras
     (:func:`build_scene` widens them to the meshes once they are loaded).
     """
     cam = desc.camera
     near, far = clip_planes(*scene_box(desc))
+    fov, offset = cam.fov, (0.0, 0.0)
+    if crop is not None:
+        fov, *offset = tile_projection(cam.fov, width, height, crop)
+        width, height = (int(v) for v in crop[2:])
     film = {"type": "hdrfilm", "width": int(width), "height": int(height),
             "pixel_format": "rgb", "rfilter": {"type": "box"}}
-    if crop is not None:
-        x0, y0, w, h = (int(v) for v in crop)
-        film.update(crop_offset_x=x0, crop_offset_y=y0, crop_width=w, crop_height=h)
     return {
         "type": "perspective",
-        "fov": cam.fov,
+        "fov": fov,
         "fov_axis": "x",
+        "principal_point_offset_x": float(offset[0]),
+        "principal_point_offset_y": float(offset[1]),
         "near_clip": near,
         "far_clip": far,
         "to_world": mi.ScalarTransform4f().look_at(origin=cam.origin, target=cam.target, up=cam.up),
@@ -172,6 +195,26 @@ def set_pixel_spread(scene, fov=None, width=None) -> None:
         params.update()
 
 
+def load_deterministic(d: dict):
+    """``mi.load_dict(d)`` with the kernels it launches run on one thread.
+
+    Mitsuba sums the vertex normals of a mesh file without normals by atomic
+    scatter-adds; on several threads their order, hence the last bits of a few
+    normals, changed from one build to the next (a render of the same scene and seed
+    then differed in its shading-normal layer). One thread keeps the order; loading
+    launches little else (Embree's BVH build has threads of its own).
+    """
+    threads = dr.thread_count()
+    dr.set_thread_count(1)
+    try:
+        scene = mi.load_dict(d)
+        dr.eval()
+        dr.sync_thread()
+    finally:
+        dr.set_thread_count(threads)
+    return scene
+
+
 def build_scene(desc, geometry=None, width=None, height=None, voxel=None, progress=None,
                 aovs=False, crop=None, bsdfs=None, moments=False):
     """Assemble the Mitsuba scene of a :class:`SceneDescription`.
@@ -230,12 +273,12 @@ def build_scene(desc, geometry=None, width=None, height=None, voxel=None, progre
             d["integrator"].update(aovs=True, moments=bool(moments))
         if desc.field is not None:
             d["field_mesh"], _ = field_mesh_shape(desc, field_bsdf, voxel, progress)
-        scene = mi.load_dict(d)
+        scene = load_deterministic(d)
     else:
         d["integrator"] = {"type": "implicit_path", "max_depth": s.max_depth, "rr_depth": s.rr_depth,
                            "eps": s.eps, "omega": s.omega, "max_steps": s.max_steps,
                            "aovs": bool(aovs), "moments": bool(moments)}
-        scene = mi.load_dict(d)
+        scene = load_deterministic(d)
         scene.integrator().attach(desc.field, field_bsdf)
     # Clip planes for the whole scene, meshes included (a far-field ring reaches the
     # horizon): an edit before the first render compiles nothing more.
