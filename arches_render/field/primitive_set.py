@@ -1,4 +1,4 @@
-"""Thousands of capsules (and spheres) as arrays behind a uniform grid.
+"""Thousands to millions of capsules (and spheres) as arrays behind a sparse grid.
 
 Unrolling a union of N primitives into the kernel makes JIT compilation explode
 (an unrolled tree of 300 nodes compiled 17x slower in a prototype). A
@@ -16,11 +16,17 @@ farther than ``m`` from ``p``, so its exact distance field is ``<= -m`` there. H
 box (which contains every primitive grown by ``m``) ``f = -m - dist(p, box)``, which
 is below the true union field and joins it continuously at the box.
 
+The grid (:class:`~arches_render.field.brick_grid.BrickGrid`) stores its cells in
+bricks of 8^3, only where some grown box reaches, so cells stay as small as the
+capsules at any count (a dense grid capped at 64^3 cells held 174 capsules a cell at
+a million); capsules are sorted by cell and packed in 32-byte records.
+
 Empty space: a distance transform of the occupied cells gives, for each cell, the
 distance ``k`` (in cells, centre to centre) to the nearest cell holding a primitive
 of its own; every primitive point lies in such a cell, so from any ``p`` in the
-cell the set is at least ``(k - sqrt(3)) * cell`` away. ``eval_bounds`` returns the
-larger of that and ``-f``, so rays cross sparse sets in strides longer than ``m``.
+cell the set is at least ``(k - sqrt(3)) * cell`` away (per brick on large grids,
+see :mod:`~arches_render.field.brick_grid`). ``eval_bounds`` returns the larger of
+that and ``-f``, so rays cross sparse sets in strides longer than ``m``.
 
 Spheres are capsules with ``a = b``.
 
@@ -28,6 +34,8 @@ References
 ----------
 Amanatides, J., Woo, A. (1987). A fast voxel traversal algorithm for ray tracing.
 Eurographics '87 (uniform grids for ray queries).
+Museth, K. (2013). VDB: High-resolution sparse volumes with dynamic topology. ACM
+TOG 32(3) (leaf bricks of 8^3 voxels).
 Paris, A. et al. (2019). Terrain amplification with implicit 3D features. ACM TOG
 38(5) (a grid/BVH over primitive boxes to accelerate large construction trees).
 """
