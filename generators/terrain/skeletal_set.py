@@ -25,7 +25,9 @@ non-negative primitives. The node's value is ``F(p) - threshold``.
 Acceleration: the primitives' support boxes (skeleton box grown by
 ``c_i + R_i (1 + A N)``, ``N`` the fBm range) are listed per cell of a uniform grid
 (CSR lists built by :func:`arches_render.field.primitive_set.grid_lists`, the
-grid of :class:`~arches_render.field.CapsuleSet`); a point loops over its own
+grid of :class:`~arches_render.field.CapsuleSet`; the per-cell arrays are then
+kept only in the 8^3 bricks where some datum is not 0,
+:class:`~arches_render.field.brick_grid.BrickLayout`); a point loops over its own
 cell's list in one Dr.Jit ``while_loop``. Unlike the capsule set this is *exact*:
 a primitive missing from the cell contributes exactly 0 there (compact support).
 The noise of a listed primitive is evaluated only where ``max(r - c, 0) < R (1 + A N)``.
