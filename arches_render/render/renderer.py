@@ -195,24 +195,26 @@ def set_pixel_spread(scene, fov=None, width=None) -> None:
         params.update()
 
 
-def load_deterministic(d: dict):
-    """``mi.load_dict(d)`` with the kernels it launches run on one thread.
+def load_mesh_files(d: dict) -> dict:
+    """``d`` with its PLY/OBJ mesh entries loaded, with Dr.Jit on one thread.
 
     Mitsuba sums the vertex normals of a mesh file without normals by atomic
     scatter-adds; on several threads their order, hence the last bits of a few
     normals, changed from one build to the next (a render of the same scene and seed
-    then differed in its shading-normal layer). One thread keeps the order; loading
-    launches little else (Embree's BVH build has threads of its own).
+    then differed in its shading-normal layer). One thread keeps the order. Only the
+    meshes load this way: loading a whole scene on one thread deadlocked OpenEXR's
+    reading of an environment map, whose tasks run on the same thread pool.
     """
     threads = dr.thread_count()
     dr.set_thread_count(1)
     try:
-        scene = mi.load_dict(d)
+        out = {k: (mi.load_dict(v) if isinstance(v, dict) and v.get("type") in ("ply", "obj") else v)
+               for k, v in d.items()}
         dr.eval()
         dr.sync_thread()
     finally:
         dr.set_thread_count(threads)
-    return scene
+    return out
 
 
 def build_scene(desc, geometry=None, width=None, height=None, voxel=None, progress=None,
@@ -258,6 +260,7 @@ def build_scene(desc, geometry=None, width=None, height=None, voxel=None, progre
         d[f"light{i}"] = light
     for i, mesh in enumerate(desc.meshes):
         d[f"mesh{i}"] = dict(mesh, bsdf=bsdfs[mesh["bsdf"]["id"]])
+    d = load_mesh_files(d)
     # The generators' scene tables (rock piles: flat meshes with baked transforms).
     for items in desc.tables.values():
         for item in items:
@@ -273,12 +276,12 @@ def build_scene(desc, geometry=None, width=None, height=None, voxel=None, progre
             d["integrator"].update(aovs=True, moments=bool(moments))
         if desc.field is not None:
             d["field_mesh"], _ = field_mesh_shape(desc, field_bsdf, voxel, progress)
-        scene = load_deterministic(d)
+        scene = mi.load_dict(d)
     else:
         d["integrator"] = {"type": "implicit_path", "max_depth": s.max_depth, "rr_depth": s.rr_depth,
                            "eps": s.eps, "omega": s.omega, "max_steps": s.max_steps,
                            "aovs": bool(aovs), "moments": bool(moments)}
-        scene = load_deterministic(d)
+        scene = mi.load_dict(d)
         scene.integrator().attach(desc.field, field_bsdf)
     # Clip planes for the whole scene, meshes included (a far-field ring reaches the
     # horizon): an edit before the first render compiles nothing more.
