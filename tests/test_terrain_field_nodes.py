@@ -490,7 +490,8 @@ def test_a_ray_that_spends_both_budgets_is_unresolved_and_a_hit():
     import drjit as dr
     import mitsuba as mi
 
-    from arches_render.render.sphere_tracer import SECOND_PASS_FACTOR, SphereTracer
+    from arches_render.render.march import SECOND_PASS_FACTOR
+    from arches_render.render.sphere_tracer import SphereTracer
     o, d = _grazing_rays()
     tracer = SphereTracer(SCULPTED, max_steps=2)
     r = tracer.query(mi.Point3f(*(mi.Float(o[:, i]) for i in range(3))),

@@ -14,10 +14,10 @@ layer            channels                  value (0 where the ray escapes)
 ``depth``        Z                         distance from the camera centre to the hit, metres
 ``position``     X, Y, Z                   world position of the hit, metres
 ``coverage``     field, mesh               1 where the hit is on the field / on a mesh
-``steps``        N                         iterations of the field tracer along the camera
-                                           ray (sphere steps; a heightfield cast's cells, or
-                                           a hybrid cast's sphere steps and rounds); misses
-                                           have steps too: proving a way free takes them
+``steps``        N                         field evaluations (sphere steps) along the camera
+                                           ray; a heightfield cast's cell visits are not
+                                           steps (a pure cast takes none); misses have
+                                           steps too: proving a way free takes them
 ``layers``       one per material layer    composite weight ``w_i`` of each layer of the
                                            field's triplanar material (sums to 1 on the field)
 ``transmittance`` R, G, B                  with an ``[atmosphere]``: transmittance ``Tr`` of
@@ -29,7 +29,7 @@ layer            channels                  value (0 where the ray escapes)
                                            without ``[atmosphere]``, not the same bits
 ``exhausted``    primary, bounce, shadow   rays of the pixel's paths (per sample) that used up
                                            the field tracer's first step budget and took its
-                                           second (:mod:`arches_render.render.sphere_tracer`);
+                                           second (:mod:`arches_render.render.march`);
                                            with a traced field only
 ``unresolved``   primary, bounce, shadow   rays that used up the second budget too, resolved
                                            conservatively (a hit at the last point, a shadow

@@ -117,7 +117,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .sphere_tracer import ray_box
+from .march import ray_box
 
 __all__ = ["RAYLEIGH_BETA", "RAYLEIGH_HEIGHT", "AEROSOL_HEIGHT", "aerosol_extinction", "phi",
            "column", "rayleigh_phase", "hg_phase", "light_sources", "Atmosphere"]

@@ -14,37 +14,12 @@ offset (capsules and spheres: exact; other leaves: their grown box), so a ray th
 passes an arch at a distance is cast exactly on both sides of it, and sphere steps
 are taken only within a few blend radii of the 3-D primitives.
 
-**Traversal** (Tevs et al. 2008, hierarchical ray stepping): the ray's interval is
-clipped to the prism box; a lane holds a level ``l`` and a cell ``(i, j)`` of that
-level and, at each iteration of one ``dr.while_loop``,
-
-* computes the cell's exit distance ``t_exit`` (the nearer of its x and y walls);
-* if the ray's lowest point over ``[t, t_exit]`` is above the cell's maximum, steps
-  to the neighbour cell through that wall and, when the step leaves the parent
-  cell, goes up one level;
-* otherwise goes down one level, first advancing ``t`` to where the ray sinks below
-  the maximum, into the child cell holding the ray's point;
-* at level 0 intersects the bilinear patch exactly (below).
-
-Cells advance by integer steps, never by re-locating a point, so rounding cannot
-make a lane revisit a cell; every iteration steps or descends, so a lane ends
-after at most ``levels + 2 (levels + cells crossed)`` iterations.
-
-**Ray-patch intersection.** In cell ``(i, j)`` the field's height is
-``lerp(lerp(h00, h10, u), lerp(h01, h11, u), v)`` with ``u = (x - x0) / dx - i`` (the
-same samples, formula and float operations as
-:meth:`~arches_render.field.Heightfield.height`). Along the segment
-``s in [0, s_b]`` from the current point, ``g(s) = h - z`` is the quadratic
-``C + B s + A s^2``, ``A = e du dv``, with ``C`` evaluated exactly as the field
-evaluates ``h - z`` at that point. The first ``s`` with ``g >= 0`` lies in an
-interval where ``g`` is monotone (``[0, s*]`` before a maximum, ``[s*, s_b]`` after a
-minimum, else ``[0, s_b]``); it is the increasing root ``(-B + sqrt(D)) / (2A)``,
-computed in the cancellation-free form ``-2C / (B + sqrt(D))`` when ``B >= 0``, and
-clamped into that interval. Whether the patch is hit at all is decided from the
-values of ``g`` at the segment's ends and at an interior maximum.
-
-**Shadow rays** (``occluded``) stop at the first *certain* hit: a cell whose
-minimum the ray sinks below holds matter, whatever the finer levels say.
+The cast itself, the maximum-mipmap traversal and its exact ray-patch test,
+is :mod:`.mipmap_traversal`; the sphere steps are :mod:`.march`'s. Every lane
+the traversal's iteration guard or the loops' budgets stop is resolved
+conservatively (an unresolved hit at the point it proved free up to), never
+as a miss. ``steps`` counts sphere steps (field evaluations), ``cells`` the
+cast's cell visits.
 
 Vertical rays, rays starting inside or below the terrain, grazing rays and rays
 from far away are handled by the same code; ``tests/test_heightfield_caster.py``
@@ -59,12 +34,16 @@ Hart, J. C. (1996). Sphere tracing. The Visual Computer 12(10).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..field.heightfield_mipmap import MaxMipmap, heightfield_cast_plan
-from .sphere_tracer import SECOND_PASS_FACTOR, SphereTracer, TraceResult, ray_box
+from ..field.heightfield_mipmap import heightfield_cast_plan
+from .march import SECOND_PASS_FACTOR, March, TraceResult, ray_box, relaxed_step
+from .mipmap_traversal import MipmapTraversal
+from .sphere_tracer import SphereTracer
 
 
 #: Rounds of the hybrid loop (cast, probe, near) after which a ray is unresolved.
@@ -118,18 +97,7 @@ class HeightfieldCaster:
         self.eps, self.scale_op, self.scale = self.sphere.eps, self.sphere.scale_op, self.sphere.scale
         self.field = self.sphere.field  # culled: what near steps evaluate
         self.omega = float(omega)
-        hf = plan.heightfield
-        self.mipmap = MaxMipmap(hf.heights_np)
-        self.top = self.mipmap.levels - 1
-        self.ncx, self.ncy = hf.nx - 1, hf.ny - 1
-        self._max = mi.Float(self.mipmap.max_flat)
-        self._min = mi.Float(self.mipmap.min_flat)
-        self._off = mi.UInt32(self.mipmap.offsets)
-        self._corners = mi.Float(self.mipmap.corners.ravel())
-        # The field's own arrays and parameters: the patch test repeats its arithmetic.
-        self._x0, self._y0 = hf._x0, hf._y0
-        self._inv_dx, self._inv_dy = hf._inv_dx, hf._inv_dy
-        self._dx, self._dy = dr.opaque(mi.Float, hf.dx), dr.opaque(mi.Float, hf.dy)
+        self.traversal = MipmapTraversal(plan.heightfield)
         op = lambda v: [dr.opaque(mi.Float, float(x)) for x in v]  # noqa: E731
         self._clip = op(plan.clip_lo), op(plan.clip_hi)
         self.hybrid = bool(plan.others)
@@ -188,10 +156,11 @@ class HeightfieldCaster:
         """
         if self.hybrid:
             return self.sphere.surface(p, t, d, cone)
-        h00, h10, h01, h11, fu, fv = self.plan.heightfield.patch(p.x, p.y)
+        hf = self.plan.heightfield
+        h00, h10, h01, h11, fu, fv = hf.patch(p.x, p.y)
         top = dr.lerp(dr.lerp(h00, h10, fu), dr.lerp(h01, h11, fu), fv) - p.z
-        hx = dr.lerp(h10 - h00, h11 - h01, fv) * self._inv_dx
-        hy = dr.lerp(h01 - h00, h11 - h10, fu) * self._inv_dy
+        hx = dr.lerp(h10 - h00, h11 - h01, fv) * hf._inv_dx
+        hy = dr.lerp(h01 - h00, h11 - h10, fu) * hf._inv_dy
         n = dr.normalize(mi.Vector3f(-hx, -hy, 1.0))
         # Nearest face of the clipping box (largest signed outside distance).
         lo, hi = self._clip
@@ -206,266 +175,173 @@ class HeightfieldCaster:
 
     # -- implementation --------------------------------------------------------------
     def _query(self, o, d, tmax, active, any_hit, cone=None):
-        """Ray queries; see the class docstring for the modes of a lane.
-
-        CAST traverses the mipmap over ``[t, t_hi]``, a stretch where the root's
-        surface is the heightfield's, clipped to its box. PROBE (hybrid trees) at
-        ``t_seg`` certifies how far the 3-D operands stay below ``-T``: a long
-        enough stretch becomes the next CAST, otherwise the lane turns to NEAR,
-        over-relaxed sphere steps on the full field (the stop rule of
-        :class:`SphereTracer`) until a step is long again. Each mode runs in a loop
-        of its own inside one outer loop, so that one iteration of a SIMD packet
-        pays for one mode's code, not for all three.
-        """
-        # Loop bodies rebind their state (``a = a & b``), never update it in place
-        # (``a &= b``): an in-place update would also change the caller's array that
-        # was passed in as loop state.
-        Int, UInt, Float, Bool = mi.Int32, mi.UInt32, mi.Float, mi.Bool
+        """Ray queries: one exact cast for plain heightfields, the hybrid loop
+        (:meth:`_hybrid`) for trees with 3-D operands."""
         o, d = mi.Point3f(o), mi.Vector3f(d)
-        tmax, active = Float(tmax), Bool(active)
-        inf = Float(dr.inf)
+        tmax, active = mi.Float(tmax), mi.Bool(active)
         t_in, t_out = ray_box(o, d, *self._clip)
         ta, tb = dr.maximum(t_in, 0.0), dr.minimum(t_out, tmax)
-        cast = self._cast_step(o, d, any_hit)
-        top = self.top
-
-        def start(t):
-            """First cell: the top one for rays that enter the box from outside (a
-            descent finds their first cells fastest), else the finest cell under
-            the start point (secondary and shadow rays leave the surface)."""
-            p = o + d * t
-            low = t > t_in
-            # Clamp before converting: far points must not overflow the integers.
-            ci = Int(dr.clip(dr.floor((p.x - self._x0) * self._inv_dx), 0.0, self.ncx - 1.0))
-            cj = Int(dr.clip(dr.floor((p.y - self._y0) * self._inv_dy), 0.0, self.ncy - 1.0))
-            return dr.select(low, 0, Int(top)), dr.select(low, ci, 0), dr.select(low, cj, 0)
-
         if not self.hybrid:
-            state = (Float(ta), Float(tb), *start(ta), Bool(False), Float(inf),
-                     active & (ta <= tb), Bool(False), UInt(0))
-            out = dr.while_loop(state, lambda *s: s[7], cast, label="heightfield_cast")
-            return TraceResult.of(out[5], out[6], out[9], Bool(False), active, self.sphere.max_steps)
+            cast = self.traversal.cast(o, d, ta, tb, active & (ta <= tb), ta > t_in, any_hit)
+            # A lane the iteration guard stopped is unresolved: a hit at the point
+            # the cast proved free up to, never a miss.
+            t = dr.select(cast.found, cast.t_hit, dr.select(cast.capped, cast.t, dr.inf))
+            return TraceResult.of(cast.found, t, 0, cast.capped, active, self.sphere.max_steps, cells=cast.iterations)
+        return self._hybrid(o, d, tmax, active, any_hit, cone, t_in, ta, tb)
 
-        CAST, PROBE, NEAR = UInt(0), UInt(1), UInt(2)
+    @dr.syntax
+    def _hybrid(self, o, d, tmax, active, any_hit, cone, t_in, ta, tb):
+        """The hybrid loop (module docstring): each lane is in one of three modes.
+
+        CAST traverses the mipmap over ``[t, t_hi]``, a stretch where the root's
+        surface is the heightfield's, clipped to its box. PROBE at ``t_seg``
+        certifies how far the 3-D operands stay below ``-T``: a long enough stretch
+        becomes the next CAST, otherwise the lane turns to NEAR, over-relaxed sphere
+        steps on the full field (:meth:`_near`) until a step is long again. Each
+        mode runs in a loop of its own inside one outer loop, so that one iteration
+        of a SIMD packet pays for one mode's code, not for all three.
+        """
+        CAST, PROBE, NEAR = mi.UInt32(0), mi.UInt32(1), mi.UInt32(2)
         f_in, f_out = ray_box(o, d, self.sphere.lo_op, self.sphere.hi_op)
         t_end = dr.minimum(f_out, tmax)
         z0, z1 = ray_box(o, d, *self._zone)
         misses_zone = (z0 > z1) | (z1 < 0.0) | (z0 > t_end)
         t0 = dr.maximum(f_in, 0.0)
-        omega0, min_cast, max_steps = self.omega, self._min_cast, self.sphere.max_steps
-        budget = max_steps * (1 + SECOND_PASS_FACTOR)
-
-        # Exact entry/exit of the rays through the grown leaves that have one.
-        spans = [_leaf_span(node, level, box, o, d) for node, level, box in self._leaves]
-        bounded = [(node, level) for (node, level, _), sp in zip(self._leaves, spans) if sp is None]
-        spans = [sp for sp in spans if sp is not None]
-
-        def probe(t_seg, alive):
-            """Where to go from ``t_seg``: ``(long, seg_end, lo, hi, near_end)``."""
-            # Every 3-D operand is <= -T on the stretch (heightfield_mipmap's module
-            # docstring): outside the zone, before the next grown leaf, or within
-            # the other leaves' own distance bounds.
-            cert, near_end = inf, -inf
-            for e0, e1 in spans:
-                cert = dr.minimum(cert, dr.select(e1 >= t_seg, dr.maximum(e0 - t_seg, 0.0), inf))
-                soon = (e0 <= t_seg + min_cast) & (e1 >= t_seg)
-                near_end = dr.maximum(near_end, dr.select(soon, e1, -inf))
-            if bounded:
-                p = o + d * t_seg
-                fp = self.sphere.footprint(cone, t_seg)
-                for node, level in bounded:
-                    cert = dr.minimum(cert, node.eval_bounds(p, (level,), d, fp)[1][0])
-            cert = dr.select(misses_zone | (t_seg >= z1), inf, dr.maximum(cert, z0 - t_seg))
-            seg_end = dr.minimum(t_seg + cert, t_end)
-            return (cert >= min_cast, seg_end, dr.maximum(t_seg, ta), dr.minimum(seg_end, tb),
-                    near_end)
-
-        def near(t, t_prev, r_prev, step, omega, found, t_hit, alive, leave, near_end, steps):
-            """One over-relaxed sphere step on the full field (as :class:`SphereTracer`;
-            ``steps`` counts every sphere step of the ray, against its budgets); past
-            ``near_end``, a long free step hands the lane back to probing at its
-            verified end."""
-            f, (r,) = self.field.eval_bounds(o + d * t, (0.0,), d, self.sphere.footprint(cone, t))
-            failed = (omega > 1.0) & (r + r_prev < step)
-            new_hit = ~failed & ((-f < self.sphere.tolerance(t, cone)) | (f >= 0.0))
-            leave = alive & ~failed & ~new_hit & (r >= min_cast) & (t >= near_end)
-            t_next = dr.select(failed, t_prev + r_prev, dr.minimum(t + omega * r, t_end))
-            t_next = dr.select(leave, t + r, t_next)
-            step = dr.select(failed, r_prev, t_next - t)
-            t_prev, r_prev = dr.select(failed, t_prev, t), dr.select(failed, r_prev, r)
-            omega = dr.select(failed, 1.0, omega0)  # relaxation resumes after a safe step
-            done = ~failed & ~new_hit & ~leave & (t >= t_end)
-            found = found | (alive & new_hit)
-            t_hit = dr.select(alive & new_hit, t, t_hit)
-            t = dr.select(new_hit, t, t_next)
-            alive = alive & ~new_hit & ~done & ~leave
-            return t, t_prev, r_prev, step, omega, found, t_hit, alive, leave, near_end, steps + 1
-
-        def outer(t, t_hi, t_seg, mode, found, t_hit, alive, it, steps):
+        budget = self.sphere.max_steps * (1 + SECOND_PASS_FACTOR)
+        spans = self._spans(o, d)
+        # Rays that miss the zone are one cast; the others start by probing.
+        mode = dr.select(misses_zone, CAST, PROBE)
+        t = mi.Float(dr.select(misses_zone, ta, t0))           # the cast's stretch [t, t_hi]
+        t_hi = mi.Float(dr.select(misses_zone, tb, t0))
+        t_seg = mi.Float(dr.select(misses_zone, t_end, t0))     # where probing (or stepping) resumes
+        found = mi.Bool(False)
+        t_hit = mi.Float(dr.inf)
+        unresolved = mi.Bool(False)
+        alive = active & dr.select(misses_zone, ta <= tb, t0 <= t_end)
+        rounds = mi.UInt32(0)
+        steps = mi.UInt32(0)
+        cells = mi.UInt32(0)
+        while dr.hint(alive & (steps < budget) & (rounds < MAX_ROUNDS), label="heightfield_hybrid"):
             # CAST: finish the current stretch.
-            c = dr.while_loop((t, t_hi, *start(t), found, t_hit, alive & (mode == CAST),
-                               Bool(False), UInt(0)), lambda *s: s[7], cast, label="hf_cast")
             casting = alive & (mode == CAST)
-            found, t_hit = c[5], c[6]
-            alive = alive & ~found
-            mode = dr.select(casting & c[8], PROBE, mode)
-            alive = alive & ~(casting & c[8] & (t_seg >= t_end))
-            # PROBE.
+            cast = self.traversal.cast(o, d, t, t_hi, casting, t > t_in, any_hit)
+            found |= casting & cast.found
+            t_hit = dr.select(casting & cast.found, cast.t_hit, t_hit)
+            cells += dr.select(casting, cast.iterations, 0)
+            capped = casting & cast.capped
+            unresolved |= capped
+            t = dr.select(capped, cast.t, t)
+            stretch_done = casting & cast.ended
+            mode = dr.select(stretch_done, PROBE, mode)
+            alive &= ~found & ~capped & ~(stretch_done & (t_seg >= t_end))
+            # PROBE: how far do the 3-D operands stay certified below -T?
             probing = alive & (mode == PROBE)
-            long, seg_end, lo, hi, near_end = probe(t_seg, probing)
+            long, seg_end, lo, hi, near_end = self._probe(o, d, t_seg, t_end, ta, tb, z0, z1, misses_zone,
+                                                          spans, cone)
             go = probing & long & (lo <= hi)
             mode = dr.select(go, CAST, dr.select(probing & ~long, NEAR, mode))
             t, t_hi = dr.select(go, lo, t), dr.select(go, hi, t_hi)
             t_seg = dr.select(probing & long, seg_end, t_seg)
             # A certified stretch off the heightfield's box holds no surface.
-            alive = alive & ~(probing & long & ~go & (seg_end >= t_end))
+            alive &= ~(probing & long & ~go & (seg_end >= t_end))
             # NEAR: sphere steps from t_seg until a step is long again.
             nearing = alive & (mode == NEAR)
-            n = dr.while_loop((Float(t_seg), Float(t_seg), Float(0.0), Float(0.0), Float(omega0), found, t_hit,
-                               nearing, Bool(False), near_end, UInt(steps)),
-                              lambda *s: s[7] & (s[10] < budget), near, label="hf_near")
-            found, t_hit = n[5], n[6]
-            steps = dr.select(nearing, n[10], steps)
-            t_seg = dr.select(nearing, n[0], t_seg)
-            mode = dr.select(nearing & n[8], PROBE, mode)
-            # A lane still stepping (n[7]) ran out of steps: it stays alive, and
-            # the outer loop's condition ends it as unresolved.
-            alive = alive & (~found & ~(nearing & ~n[8] & ~n[7]))
-            return t, t_hi, t_seg, mode, found, t_hit, alive, it + 1, steps
+            near = self._near(o, d, t_seg, t_end, near_end, nearing, steps, budget, cone)
+            found |= near.hit
+            t_hit = dr.select(near.hit, near.t, t_hit)
+            steps = dr.select(nearing, near.steps, steps)
+            t_seg = dr.select(nearing, near.t, t_seg)
+            mode = dr.select(near.leave, PROBE, mode)
+            unresolved |= near.invalid
+            # A lane still stepping ran out of steps: it stays alive, and this loop's
+            # condition ends it as unresolved.
+            alive &= ~found & ~near.invalid & ~(nearing & near.done)
+            rounds += 1
+        # Lanes still alive used up their steps or rounds: unresolved, a hit at the
+        # point they proved free up to, never a miss.
+        unresolved |= alive
+        # (A CAST lane's t_seg already points past the stretch it has yet to cast.)
+        t_last = dr.select(mode == CAST, t, t_seg)
+        return TraceResult.of(found, dr.select(found, t_hit, t_last), steps, unresolved, active,
+                              self.sphere.max_steps, cells=cells + rounds)
 
-        # Rays that miss the zone are one cast; the others start by probing.
-        mode0 = dr.select(misses_zone, CAST, PROBE)
-        state = (Float(dr.select(misses_zone, ta, t0)), Float(dr.select(misses_zone, tb, t0)),
-                 Float(dr.select(misses_zone, t_end, t0)), UInt(mode0), Bool(False), Float(inf),
-                 active & dr.select(misses_zone, ta <= tb, t0 <= t_end), UInt(0), UInt(0))
-        out = dr.while_loop(state, lambda *s: s[6] & (s[8] < budget) & (s[7] < MAX_ROUNDS), outer,
-                            label="heightfield_hybrid")
-        # Lanes still alive used up their steps or rounds: unresolved, a hit at
-        # their last point (TraceResult), never a miss.
-        t_last = dr.select(out[3] == NEAR, out[2], out[0])
-        return TraceResult.of(out[4], dr.select(out[4], out[5], t_last), out[8] + out[7], out[6], active,
-                              max_steps)
+    def _spans(self, o, d):
+        """``(spans, bounded)``: the exact entry and exit of the rays through each grown
+        leaf that has them, and the leaves certified by their own bounds instead."""
+        spans = [_leaf_span(node, level, box, o, d) for node, level, box in self._leaves]
+        bounded = [(node, level) for (node, level, _), sp in zip(self._leaves, spans) if sp is None]
+        return [sp for sp in spans if sp is not None], bounded
 
-    def _cast_step(self, o, d, any_hit):
-        """The body of the traversal loop for rays ``o + t d`` (module docstring).
+    def _probe(self, o, d, t_seg, t_end, ta, tb, z0, z1, misses_zone, spans, cone):
+        """Where to go from ``t_seg``: ``(long, seg_end, lo, hi, near_end)``.
 
-        Its state is ``(t, t_hi, lvl, ci, cj, found, t_hit, alive, ended, it)``: the ray
-        is at ``t`` in cell ``(ci, cj)`` of level ``lvl`` and looks for a hit up to
-        ``t_hi``; a lane stops with ``found`` (at ``t_hit``) or ``ended``.
+        Every 3-D operand is ``<= -T`` on the stretch (heightfield_mipmap's module
+        docstring): outside the zone, before the next grown leaf, or within the
+        other leaves' own distance bounds. ``long``: the stretch is worth a cast,
+        over ``[lo, hi]`` (clipped to the heightfield's box); ``near_end``: where the
+        leaves the ray is about to enter end (sphere steps go at least that far)."""
+        spans, bounded = spans
+        inf, min_cast = mi.Float(dr.inf), self._min_cast
+        cert, near_end = inf, -inf
+        for e0, e1 in spans:
+            cert = dr.minimum(cert, dr.select(e1 >= t_seg, dr.maximum(e0 - t_seg, 0.0), inf))
+            soon = (e0 <= t_seg + min_cast) & (e1 >= t_seg)
+            near_end = dr.maximum(near_end, dr.select(soon, e1, -inf))
+        if bounded:
+            p = o + d * t_seg
+            fp = self.sphere.footprint(cone, t_seg)
+            for node, level in bounded:
+                cert = dr.minimum(cert, node.eval_bounds(p, (level,), d, fp)[1][0])
+        cert = dr.select(misses_zone | (t_seg >= z1), inf, dr.maximum(cert, z0 - t_seg))
+        seg_end = dr.minimum(t_seg + cert, t_end)
+        return cert >= min_cast, seg_end, dr.maximum(t_seg, ta), dr.minimum(seg_end, tb), near_end
+
+    @dr.syntax
+    def _near(self, o, d, t_start, t_end, near_end, active, steps, budget, cone):
+        """Over-relaxed sphere steps on the full field from ``t_start`` (:mod:`.march`;
+        ``steps`` counts every sphere step of the ray, against its budgets). Past
+        ``near_end``, a long free step hands the lane back to probing at its
+        verified end (``leave``).
+
+        Returns
+        -------
+        _NearOutcome
         """
-        Int, UInt, Float = mi.Int32, mi.UInt32, mi.Float
-        inf = Float(dr.inf)
-        inv = mi.Vector3f(dr.rcp(d.x), dr.rcp(d.y), dr.rcp(d.z))
-        sx = dr.select(d.x >= 0.0, Int(1), Int(-1))
-        sy = dr.select(d.y >= 0.0, Int(1), Int(-1))
-        top, ncx, ncy = self.top, self.ncx, self.ncy
-        x0, y0, dx, dy = self._x0, self._y0, self._dx, self._dy
-        max_iter = self._max_iter
-        offsets = [int(v) for v in self.mipmap.offsets]
+        march = March.start(t_start, self.omega)
+        hit = mi.Bool(False)
+        invalid = mi.Bool(False)
+        done = mi.Bool(False)
+        leave = mi.Bool(False)
+        alive = mi.Bool(active)
+        steps = mi.UInt32(steps)
+        while dr.hint(alive & (steps < budget), label="hf_near"):
+            t_now = march.t
+            f, (r,) = self.field.eval_bounds(o + d * t_now, (0.0,), d, self.sphere.footprint(cone, t_now))
+            march, out = relaxed_step(march, f, r, t_end, self.sphere.tolerance(t_now, cone), self.omega)
+            going = alive & ~out.failed & ~out.hit & ~out.invalid & (r >= self._min_cast) & (t_now >= near_end)
+            # Leave at the end of the verified free interval, not at a relaxed point.
+            march.t = dr.select(going, t_now + r, march.t)
+            leave |= going
+            hit |= alive & out.hit
+            invalid |= alive & out.invalid
+            done |= alive & out.done & ~going
+            alive &= ~(out.hit | out.invalid | out.done | going)
+            steps += 1
+        # A lane the budget stopped reports its verified frontier (unresolved).
+        t = dr.select(alive, dr.minimum(march.t, march.frontier), march.t)
+        return _NearOutcome(hit=hit, t=t, leave=leave, done=done, invalid=invalid, steps=steps)
 
-        def cells(lvl):
-            # Cells per row and column at level lvl: ceil(n / 2^lvl).
-            one = Int(1) << lvl
-            return (ncx + one - 1) >> lvl, (ncy + one - 1) >> lvl
 
-        def step_fn(t, t_hi, lvl, ci, cj, found, t_hit, alive, ended, it):
-            size = Float(Int(1) << lvl)
-            csx, csy = dx * size, dy * size
-            ex = x0 + Float(dr.select(d.x >= 0.0, ci + 1, ci)) * csx
-            ey = y0 + Float(dr.select(d.y >= 0.0, cj + 1, cj)) * csy
-            tx = dr.select(d.x != 0.0, (ex - o.x) * inv.x, inf)
-            ty = dr.select(d.y != 0.0, (ey - o.y) * inv.y, inf)
-            t_wall = dr.minimum(tx, ty)
-            t_exit = dr.minimum(t_wall, t_hi)
-            nxl, _ = cells(lvl)
-            off = UInt(0)
-            for l_, o_ in enumerate(offsets):
-                off = dr.select(lvl == l_, UInt(o_), off) if l_ else off
-            k = off + UInt(cj * nxl + ci)
-            zmax = dr.gather(Float, self._max, k, alive)
-            za, zb = o.z + d.z * t, o.z + d.z * t_exit
-            zlow = dr.minimum(za, zb)
-            empty = t > t_hi
-            touch = alive & ~empty & (zlow <= zmax)
-            leaf = touch & (lvl == 0)
+@dataclass
+class _NearOutcome:
+    """What a lane's sphere steps near the 3-D operands ended with (:meth:`HeightfieldCaster._near`)."""
 
-            # Exact ray-patch test on [t, t_exit] (module docstring), skipped by
-            # SIMD packets without a lane at level 0.
-            def patch_test(t, t_exit, za, ci, cj, leaf):
-                h00, h10, h01, h11 = dr.gather(mi.Vector4f, self._corners, UInt(cj * ncx + ci), leaf)
-                ua = (o.x + d.x * t - x0) * self._inv_dx - Float(ci)
-                va = (o.y + d.y * t - y0) * self._inv_dy - Float(cj)
-                C = dr.lerp(dr.lerp(h00, h10, ua), dr.lerp(h01, h11, ua), va) - za
-                du, dv = d.x * self._inv_dx, d.y * self._inv_dy
-                bu, bv, e = h10 - h00, h01 - h00, (h11 - h01) - (h10 - h00)
-                B = bu * du + bv * dv + e * (ua * dv + va * du) - d.z
-                A = e * du * dv
-                sb = dr.maximum(t_exit - t, 0.0)
-                g1 = C + sb * (B + A * sb)
-                s_star = -B / (2.0 * A)
-                inner = (A != 0.0) & (s_star > 0.0) & (s_star < sb)
-                cap = inner & (A < 0.0)
-                gmax = dr.select(cap, C + s_star * (B + A * s_star), -inf)
-                patch = leaf & ((C >= 0.0) | (g1 >= 0.0) | (gmax >= 0.0))
-                # The monotone bracket [lo, hi] holding the first root.
-                lo = dr.select(inner & (A > 0.0), s_star, 0.0)
-                hi = dr.select(cap & (gmax >= 0.0), s_star, sb)
-                sq = dr.sqrt(dr.maximum(dr.fma(B, B, -4.0 * A * C), 0.0))
-                root = dr.select(B >= 0.0, -2.0 * C / (B + sq), (sq - B) / (2.0 * A))
-                root = dr.select(dr.isfinite(root), dr.clip(root, lo, hi), hi)
-                return patch, dr.select(C >= 0.0, 0.0, root)
-
-            patch, s_hit = dr.if_stmt((t, t_exit, za, ci, cj, leaf), leaf, patch_test,
-                                      lambda *a: (mi.Bool(False), Float(0.0)), label="hf_patch")
-
-            # Certain hit for shadow rays: the ray sinks below the cell's minimum.
-            hit_now = patch
-            if any_hit:
-                zmin = dr.gather(Float, self._min, k, touch)
-                hit_now = patch | (touch & (zlow <= zmin))
-            t_now = dr.select(patch, t + s_hit, t)
-
-            # Descend: advance to where the ray sinks below the cell's maximum.
-            down = touch & (lvl > 0) & ~hit_now
-            t_d = dr.select(za > zmax, t + (zmax - za) * inv.z, t)
-            t_d = dr.maximum(dr.minimum(t_d, t_exit), t)
-            half_x, half_y = csx * 0.5, csy * 0.5
-            right = o.x + d.x * t_d >= x0 + Float(2 * ci + 1) * half_x
-            upper = o.y + d.y * t_d >= y0 + Float(2 * cj + 1) * half_y
-            cnx, cny = cells(dr.maximum(lvl - 1, 0))
-            ci_d = dr.minimum(2 * ci + dr.select(right, Int(1), Int(0)), cnx - 1)
-            cj_d = dr.minimum(2 * cj + dr.select(upper, Int(1), Int(0)), cny - 1)
-
-            # Step through the exit wall; go up when leaving the parent cell.
-            step = alive & ~hit_now & ~down
-            go_x = tx <= ty
-            ci_s = ci + dr.select(go_x, sx, 0)
-            cj_s = cj + dr.select(go_x, 0, sy)
-            up = (lvl < top) & (((ci_s >> 1) != (ci >> 1)) | ((cj_s >> 1) != (cj >> 1)))
-            ci_s, cj_s = dr.select(up, ci_s >> 1, ci_s), dr.select(up, cj_s >> 1, cj_s)
-            lvl_s = dr.select(up, lvl + 1, lvl)
-            unx, uny = cells(lvl_s)
-            out = (ci_s < 0) | (ci_s >= unx) | (cj_s < 0) | (cj_s >= uny)
-            # The stretch is done: its end lies in this cell, or the ray left the grid.
-            ends = step & (empty | (t_wall >= t_hi) | out)
-            step = step & ~ends
-
-            t = dr.select(down, t_d, dr.select(step, dr.maximum(t, t_exit), t))
-            lvl = dr.select(down, lvl - 1, dr.select(step, lvl_s, lvl))
-            ci = dr.select(down, ci_d, dr.select(step, ci_s, ci))
-            cj = dr.select(down, cj_d, dr.select(step, cj_s, cj))
-            found = found | hit_now
-            t_hit = dr.select(hit_now, t_now, t_hit)
-            # Termination follows from the integer steps; a budget guards it anyway.
-            alive = alive & (~hit_now & ~ends & (it + 1 < max_iter))
-            return t, t_hi, lvl, ci, cj, found, t_hit, alive, ended | ends, it + 1
-
-        return step_fn
-
-    @property
-    def _max_iter(self):
-        # At most top descents per ascent, ascents <= cells crossed.
-        return self.top + 2 * (self.top + 2 * (self.ncx + self.ncy)) + 16
+    hit: object
+    t: object
+    leave: object
+    done: object
+    invalid: object
+    steps: object
 
 
 def _grown_box(node, grow):

@@ -67,7 +67,7 @@ import mitsuba as mi
 from ..backend import variant_class
 from .aovs import DEPTH_CHANNEL, MOMENT_CHANNELS, RAY_COUNT_KINDS, aov_channel_names, primary_aovs, second_moments
 from .heightfield_caster import make_tracer
-from .sphere_tracer import position_ulps
+from .march import position_ulps
 
 __all__ = ["ImplicitPathIntegrator", "mis_weight", "register"]
 
@@ -159,7 +159,7 @@ class _ImplicitPathImpl:
         -------
         (mi.SurfaceInteraction3f, mi.Bool, TraceResult or None)
             The hit, whether it is on the field, and the field query's result
-            (:class:`~.sphere_tracer.TraceResult`; None without a field).
+            (:class:`~.march.TraceResult`; None without a field).
         """
         si = scene.ray_intersect(ray, mi.RayFlags.All, coherent=False, active=active)
         if self.tracer is None:
@@ -205,9 +205,12 @@ class _ImplicitPathImpl:
         return dr.select(field_hit, mi.BSDFPtr(self.field_bsdf), si.bsdf(ray))
 
     # -- estimator ---------------------------------------------------------------
+    @dr.syntax
     def sample(self, scene, sampler, ray, medium=None, active=True):
-        bsdf_ctx = mi.BSDFContext()
-        cone0 = self.camera_cone(sampler, ray)
+        """One path per lane (module docstring): ``(L, valid, aovs)``. The optional
+        parts of the state (fog-free path, cone, AOVs, ray counts) are empty tuples
+        when off, so that their code is not traced."""
+        ctx = mi.BSDFContext()
         ray = mi.Ray3f(ray)
         L = mi.Spectrum(0.0)
         beta = mi.Spectrum(1.0)
@@ -218,126 +221,144 @@ class _ImplicitPathImpl:
         prev_si = dr.zeros(mi.SurfaceInteraction3f)
         prev_bsdf_pdf = mi.Float(1.0)
         prev_bsdf_delta = mi.Bool(True)
-        atm = self.atmosphere
+        cone = self.camera_cone(sampler, ray) or ()
         # The fog-free radiance and throughput of the same path (AOV beauty_clear).
-        clear = (mi.Spectrum(0.0), mi.Spectrum(1.0)) if atm is not None and self.aovs else ()
-        cone = () if cone0 is None else cone0
+        clear = (mi.Spectrum(0.0), mi.Spectrum(1.0)) if self.atmosphere is not None and self.aovs else ()
         # AOVs of the first vertex (primary hit), recorded in the loop.
         aov = tuple(mi.Float(0.0) for _ in range(self.primary_aov_count())) if self.aovs else ()
         # Rays of the path that exhausted / were unresolved, by kind (AOVs too).
         counts = tuple(mi.Float(0.0) for _ in range(2 * len(RAY_COUNT_KINDS))) if aov and self.tracer else ()
 
-        def cond(*state):
-            return state[-1]
-
-        def body(ray, L, beta, eta, depth, valid_ray, prev_si, prev_bsdf_pdf, prev_bsdf_delta, clear,
-                 cone, aov, counts, active):
+        while dr.hint(active, label="implicit_path"):
             primary = depth == 0  # lanes whose ray left the camera (a miss ends a path)
             si, field_hit, res = self.intersect(scene, ray, active, cone or None)
             # The cone at the hit: shadow rays keep its spread, bounces widen it.
-            hit_cone = (cone[0] + cone[1] * dr.select(si.is_valid(), si.t, 0.0), cone[1]) if cone else None
-            if clear:
-                L_c, beta_c = clear
-            tr = None
-            if atm is not None:
-                tr, L_in = atm.segment(ray.o, ray.d, atm.segment_length(ray, si))
-                L = dr.select(active, L + beta * L_in, L)
-                beta = dr.select(active, beta * tr, beta)
+            hit_cone = (cone[0] + cone[1] * dr.select(si.is_valid(), si.t, 0.0), cone[1]) if cone else ()
+            L, beta, clear, tr = self.fog_segment(ray, si, L, beta, clear, active)
             # The field's material shaded once per vertex, for the AOVs, the light
             # sample and the BSDF sample alike; its cavity term at the camera ray's hit.
-            shading = None
-            if self.shades_field:
-                needed = active & si.is_valid() & field_hit & (primary | (depth + 1 < self.max_depth))
-                shading = self.field_bsdf.shade(si, needed, cavity=primary,
-                                                cone_radius=hit_cone[0] if hit_cone else None)
-            if aov:
-                steps = res.steps if res is not None else mi.UInt32(0)
-                albedo = None if shading is None else shading[0]
-                aov = self.record_aovs(scene, ray, si, field_hit, steps, tr, active & primary, aov, albedo)
-            if counts:
-                counts = count_rays(counts, 0, res, active & primary)
-                counts = count_rays(counts, 1, res, active & ~primary)
+            shading = self.shade_field(si, field_hit, active & (primary | (depth + 1 < self.max_depth)), primary,
+                                       hit_cone)
+            aov = self.record_aovs(scene, ray, si, field_hit, res, tr, active & primary, aov, shading)
+            counts = count_rays(counts, (res, res), (active & primary, active & ~primary), (0, 1))
 
             # Emission reached by BSDF sampling (environment or area light), MIS-weighted.
-            ds = mi.DirectionSample3f(scene, si, prev_si)
-            em_pdf = mi.Float(0.0)
-            em_pdf[~prev_bsdf_delta] = scene.pdf_emitter_direction(prev_si, ds, ~prev_bsdf_delta)
-            visible_em = active
-            if self.hide_emitters:
-                visible_em &= ~((depth == 0) & ~si.is_valid())
-            Le = ds.emitter.eval(si, visible_em & (prev_bsdf_pdf > 0))
-            w_bsdf = mis_weight(prev_bsdf_pdf, em_pdf)
-            L = dr.select(visible_em, L + beta * w_bsdf * Le, L)
-            if clear:
-                L_c = dr.select(visible_em, L_c + beta_c * w_bsdf * Le, L_c)
+            L, clear = self.emission_hit(scene, si, prev_si, prev_bsdf_pdf, prev_bsdf_delta, depth == 0, L, beta,
+                                         clear, active)
 
             active_next = active & si.is_valid() & (depth + 1 < self.max_depth)
             bsdf = self.bsdf_at(si, ray, field_hit)
-
-            # Next-event estimation.
-            active_em = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
-            ds, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), False, active_em)
-            active_em &= ds.pdf != 0.0
-            shadow = si.spawn_ray_to(ds.p)
-            shadow.maxt = dr.select(ds.delta | (ds.dist < dr.inf), shadow.maxt, dr.inf)
-            blocked, res = self.occluded(scene, shadow, active_em, hit_cone)
-            if counts:
-                counts = count_rays(counts, 2, res, active_em)
-            active_em &= ~blocked
-            wo = si.to_local(ds.d)
-            bsdf_val, bsdf_pdf = self.eval_pdf(bsdf, shading, field_hit, bsdf_ctx, si, wo, active_em)
-            mis_em = dr.select(ds.delta, 1.0, mis_weight(ds.pdf, bsdf_pdf))
-            if clear:
-                L_c = dr.select(active_em, L_c + beta_c * mis_em * bsdf_val * em_weight, L_c)
-            if atm is not None:
-                em_weight = em_weight * atm.shadow_transmittance(si, ds)
-            L = dr.select(active_em, L + beta * mis_em * bsdf_val * em_weight, L)
+            L, clear, counts = self.next_event(scene, sampler, si, bsdf, shading, field_hit, hit_cone, ctx, L, beta,
+                                               clear, counts, active_next)
 
             # BSDF sampling.
-            bs, bsdf_weight = self.sample_bsdf(bsdf, shading, field_hit, bsdf_ctx, si, sampler.next_1d(),
+            bs, bsdf_weight = self.sample_bsdf(bsdf, shading, field_hit, ctx, si, sampler.next_1d(),
                                                sampler.next_2d(), active_next)
             valid_ray |= active & si.is_valid()
             ray = si.spawn_ray(si.to_world(bs.wo))
             beta *= bsdf_weight
-            if clear:
-                beta_c *= bsdf_weight
+            clear = (clear[0], clear[1] * bsdf_weight) if clear else ()
             eta *= bs.eta
             prev_si = dr.detach(si)
             prev_bsdf_pdf = bs.pdf
             prev_bsdf_delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
-            if cone:
-                cone = (hit_cone[0], hit_cone[1] + dr.select(prev_bsdf_delta, 0.0, self.lod_bounce_spread))
+            cone = (hit_cone[0], hit_cone[1] + dr.select(prev_bsdf_delta, 0.0, self.lod_bounce_spread)) if cone else ()
             depth[si.is_valid()] += 1
 
-            # Russian roulette.
-            beta_max = dr.max(beta)
-            # A fog-free path goes on where dense fog has zeroed the fogged throughput.
-            active_next &= (dr.max(beta_c) if clear else beta_max) != 0.0
-            rr_prob = dr.minimum(beta_max * dr.square(eta), 0.95)
-            rr_active = depth >= self.rr_depth
-            beta[rr_active] *= dr.rcp(rr_prob)
-            if clear:
-                beta_c[rr_active] *= dr.rcp(rr_prob)
-                clear = (L_c, beta_c)
-            rr_continue = sampler.next_1d() < rr_prob
-            active_next &= ~rr_active | rr_continue
-            return (ray, L, beta, eta, depth, valid_ray, prev_si, prev_bsdf_pdf, prev_bsdf_delta, clear,
-                    cone, aov, counts, active_next)
+            beta, clear, active = self.roulette(sampler, beta, clear, eta, depth, active_next)
 
-        state = dr.while_loop((ray, L, beta, eta, depth, valid_ray, prev_si, prev_bsdf_pdf,
-                               prev_bsdf_delta, clear, cone, aov, counts, active), cond, body,
-                              label="implicit_path")
-        L, valid_ray = state[1], state[5]
+        return L, valid_ray, self.outputs(L, aov, clear, counts)
+
+    # -- the parts of a path vertex ----------------------------------------------
+    def fog_segment(self, ray, si, L, beta, clear, active):
+        """``(L, beta, clear, tr)`` after the segment of ``ray`` up to ``si``: its
+        in-scatter added and its transmittance ``tr`` applied (the fog-free path
+        ``clear`` is left as it is; ``tr`` is None without an atmosphere)."""
+        atm = self.atmosphere
+        if atm is None:
+            return L, beta, clear, None
+        tr, L_in = atm.segment(ray.o, ray.d, atm.segment_length(ray, si))
+        return dr.select(active, L + beta * L_in, L), dr.select(active, beta * tr, beta), clear, tr
+
+    def shade_field(self, si, field_hit, needed, primary, hit_cone):
+        """The field material's shading of the vertex (None when it cannot shade once
+        for all its queries): where ``needed`` on field hits, with its cavity term on
+        camera rays' hits."""
+        if not self.shades_field:
+            return None
+        return self.field_bsdf.shade(si, needed & si.is_valid() & field_hit, cavity=primary,
+                                     cone_radius=hit_cone[0] if hit_cone else None)
+
+    def emission_hit(self, scene, si, prev_si, prev_pdf, prev_delta, first, L, beta, clear, active):
+        """``(L, clear)`` with the emission that BSDF sampling reached at ``si``, weighted by
+        MIS against emitter sampling (``first``: camera rays, which ``hide_emitters`` hides)."""
+        ds = mi.DirectionSample3f(scene, si, prev_si)
+        em_pdf = mi.Float(0.0)
+        em_pdf[~prev_delta] = scene.pdf_emitter_direction(prev_si, ds, ~prev_delta)
+        visible = mi.Bool(active)
+        if self.hide_emitters:
+            visible &= ~(first & ~si.is_valid())
+        Le = ds.emitter.eval(si, visible & (prev_pdf > 0))
+        w = mis_weight(prev_pdf, em_pdf)
+        L = dr.select(visible, L + beta * w * Le, L)
+        if clear:
+            clear = (dr.select(visible, clear[0] + clear[1] * w * Le, clear[0]), clear[1])
+        return L, clear
+
+    def next_event(self, scene, sampler, si, bsdf, shading, field_hit, hit_cone, ctx, L, beta, clear, counts,
+                   active):
+        """``(L, clear, counts)`` after next-event estimation at ``si``: one emitter
+        sample, its shadow ray (meshes and field) and the MIS-weighted contribution.
+
+        A BSDF that reflects on its front side only (no transmission, no back side:
+        Mitsuba's ``diffuse``, the ``triplanar`` material) is 0 unless both directions
+        lie above its shading frame, so no shadow ray is traced where the light is
+        below the surface: on a landscape at a low sun about half of them."""
+        active_em = active & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
+        ds, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), False, active_em)
+        active_em &= ds.pdf != 0.0
+        wo = si.to_local(ds.d)
+        front_only = ~mi.has_flag(bsdf.flags(), mi.BSDFFlags.Transmission) & \
+            ~mi.has_flag(bsdf.flags(), mi.BSDFFlags.BackSide)
+        active_em &= ~front_only | ((mi.Frame3f.cos_theta(si.wi) > 0.0) & (mi.Frame3f.cos_theta(wo) > 0.0))
+        shadow = si.spawn_ray_to(ds.p)
+        shadow.maxt = dr.select(ds.delta | (ds.dist < dr.inf), shadow.maxt, dr.inf)
+        blocked, res = self.occluded(scene, shadow, active_em, hit_cone or None)
+        counts = count_rays(counts, (res,), (active_em,), (2,))
+        active_em &= ~blocked
+        bsdf_val, bsdf_pdf = self.eval_pdf(bsdf, shading, field_hit, ctx, si, wo, active_em)
+        mis = dr.select(ds.delta, 1.0, mis_weight(ds.pdf, bsdf_pdf))
+        if clear:
+            clear = (dr.select(active_em, clear[0] + clear[1] * mis * bsdf_val * em_weight, clear[0]), clear[1])
+        if self.atmosphere is not None:
+            em_weight = em_weight * self.atmosphere.shadow_transmittance(si, ds)
+        return dr.select(active_em, L + beta * mis * bsdf_val * em_weight, L), clear, counts
+
+    def roulette(self, sampler, beta, clear, eta, depth, active):
+        """Russian roulette from ``rr_depth``, continuation probability
+        ``min(max(beta) eta^2, 0.95)``: ``(beta, clear, active)``."""
+        beta_max = dr.max(beta)
+        # A fog-free path goes on where dense fog has zeroed the fogged throughput.
+        active = active & ((dr.max(clear[1]) if clear else beta_max) != 0.0)
+        rr_prob = dr.minimum(beta_max * dr.square(eta), 0.95)
+        rr_active = depth >= self.rr_depth
+        beta = dr.select(rr_active, beta * dr.rcp(rr_prob), beta)
+        if clear:
+            clear = (clear[0], dr.select(rr_active, clear[1] * dr.rcp(rr_prob), clear[1]))
+        rr_continue = sampler.next_1d() < rr_prob
+        return beta, clear, active & (~rr_active | rr_continue)
+
+    def outputs(self, L, aov, clear, counts):
+        """The AOV channels of a finished path, in the order of :meth:`aov_names`."""
         if not self.aovs:
-            return L, valid_ray, []
-        aovs = list(state[11])
-        if atm is not None:
-            L_c = state[9][0]
-            aovs += [L_c.x, L_c.y, L_c.z]
-        aovs += list(state[12])
+            return []
+        out = list(aov)
+        if self.atmosphere is not None:
+            out += [clear[0].x, clear[0].y, clear[0].z]
+        out += list(counts)
         if self.moments:
-            aovs += second_moments(L, aovs[DEPTH_CHANNEL])
-        return L, valid_ray, aovs
+            out += second_moments(L, out[DEPTH_CHANNEL])
+        return out
 
     def primary_aov_count(self):
         """Channels that :meth:`record_aovs` fills (all but the ray counts, ``beauty_clear``
@@ -367,14 +388,19 @@ class _ImplicitPathImpl:
         bm, wm = bsdf.sample(ctx, si, sample1, sample2, active & ~field_hit)
         return dr.select(field_hit, bf, bm), dr.select(field_hit, wf, wm)
 
-    def record_aovs(self, scene, ray, si, field_hit, steps, tr, first, old, albedo=None):
+    def record_aovs(self, scene, ray, si, field_hit, res, tr, first, old, shading=None):
         """The AOV values of the camera rays' hits (lanes ``first``), in the order of
-        :meth:`aov_names`; ``old`` elsewhere. ``steps``: the field trace's steps;
-        ``tr``: the camera segment's transmittance (None without an atmosphere);
-        ``albedo``: the field's albedo at its hits, from the vertex's shading.
+        :meth:`aov_names`; ``old`` elsewhere (``()`` without AOVs). ``res``: the field
+        query's :class:`~.march.TraceResult` (None without a field); ``tr``: the camera
+        segment's transmittance (None without an atmosphere); ``shading``: the
+        vertex's field shading, whose albedo it reuses.
 
         Recorded at the path's first vertex, so no second primary trace is
         needed; packets without a first-vertex lane skip the shading it takes."""
+        if not old:
+            return old
+        steps = res.steps if res is not None else mi.UInt32(0)
+        albedo = None if shading is None else shading[0]
         field_bsdf = self.field_bsdf if self.tracer else None
         # Perspective cameras start rays on the near plane: measure depth from the
         # camera centre instead, at the unlifted hit point.
@@ -406,13 +432,17 @@ class _ImplicitPathImpl:
                 f"field={'attached' if self.tracer else 'none'}]")
 
 
-def count_rays(counts, kind, res, lanes):
-    """Add the lanes ``lanes`` of the query ``res`` to the ``exhausted`` and
-    ``unresolved`` counters of ray kind ``kind`` (an index of ``RAY_COUNT_KINDS``)."""
+def count_rays(counts, results, lanes, kinds):
+    """Add the lanes ``lanes[i]`` of the queries ``results[i]`` to the ``exhausted`` and
+    ``unresolved`` counters of ray kind ``kinds[i]`` (an index of ``RAY_COUNT_KINDS``);
+    ``counts`` is ``()`` when nothing is counted."""
+    if not counts:
+        return counts
     n = len(RAY_COUNT_KINDS)
     out = list(counts)
-    out[kind] = out[kind] + dr.select(lanes & res.exhausted, 1.0, 0.0)
-    out[n + kind] = out[n + kind] + dr.select(lanes & res.unresolved, 1.0, 0.0)
+    for res, lane, kind in zip(results, lanes, kinds):
+        out[kind] = out[kind] + dr.select(lane & res.exhausted, 1.0, 0.0)
+        out[n + kind] = out[n + kind] + dr.select(lane & res.unresolved, 1.0, 0.0)
     return tuple(out)
 
 

@@ -3,16 +3,9 @@
 For a field ``f`` (positive inside) with Lipschitz bound ``L``, a point ``p`` in air
 is at least ``r(p) = -f(p) / L`` away from the surface (Hart 1996), so a ray may
 advance by ``r``. The tracer uses the tighter local bound ``r`` composed through the
-operators by ``Node.eval_bounds`` (same guarantee, see :mod:`arches_render.field.node`).
-Over-relaxation (Keinert et al. 2014) advances by ``omega r``
-instead; the step was safe when the free intervals of the two points on the ray's
-line overlap, ``r_prev + r >= step`` (``eval_bounds`` with the ray direction returns
-two-sided line bounds, which need not be balls); otherwise the tracer goes back to the previous point, takes
-the plain step ``r_prev`` and continues with ``omega = 1``.
-
-A ray stops on the surface when ``-f < eps t`` (a tolerance that grows with distance),
-never on ``-f / L < eps t``: a loose ``L`` would stop rays early and inflate thin
-features.
+operators by ``Node.eval_bounds`` (same guarantee, see :mod:`arches_render.field.node`)
+and over-relaxed steps whose safety is checked after the fact: the step, its loop
+state and its stop rule are :mod:`.march`'s, shared by every tracer.
 
 Cones (footprint level of detail, :mod:`arches_render.field.lod`): a query may
 give each lane its cone ``(r0, s)``, radius ``r0 + s t`` at distance ``t``. The field
@@ -27,13 +20,10 @@ once.
 References
 ----------
 Hart, J. C. (1996). Sphere tracing. The Visual Computer 12(10).
-Keinert, B., Schäfer, H., Korndörfer, J., Ganse, U., Stamminger, M. (2014). Enhanced
-sphere tracing. STAG 2014, 1-8.
+Amanatides, J. (1984). Ray tracing with cones. SIGGRAPH '84, 129-135.
 """
 
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import drjit as dr
 import mitsuba as mi
@@ -43,6 +33,7 @@ from ..field import gradient
 from ..field.culling import with_culling
 from ..field.lod import Footprint
 from ..field.node import finite_box
+from .march import SECOND_PASS_FACTOR, March, TraceResult, position_ulps, ray_box, relaxed_step
 
 #: Fraction of the cone's radius that a hit may stay in front of the surface. At a
 #: camera ray's cone it is about ``eps t``: silhouettes are not dilated (a hit within
@@ -50,65 +41,6 @@ from ..field.node import finite_box
 #: mean of the boulders scene against its mesh by 0.75 %). Bounce rays, whose cones
 #: are wide, stop much earlier.
 CONE_TOLERANCE = 0.05
-
-#: A ray that exhausts ``max_steps`` goes on for this many times more steps.
-SECOND_PASS_FACTOR = 16
-
-
-@dataclass
-class TraceResult:
-    """What a ray query found, per lane.
-
-    Attributes
-    ----------
-    hit : mi.Bool
-        A surface was met (unresolved rays included: they are conservative hits).
-    t : mi.Float
-        Distance of the hit (of the last point for unresolved rays).
-    steps : mi.UInt32
-        Loop iterations the ray took.
-    exhausted : mi.Bool
-        The ray used up its first budget (``max_steps``).
-    unresolved : mi.Bool
-        The ray used up the second budget too and was resolved as a hit.
-    """
-
-    hit: object
-    t: object
-    steps: object
-    exhausted: object
-    unresolved: object
-
-    @classmethod
-    def of(cls, hit, t, steps, alive, active, max_steps):
-        """The result of a loop that ended with ``alive`` lanes still unresolved."""
-        unresolved = mi.Bool(alive) & active
-        return cls(hit=(mi.Bool(hit) | unresolved) & active, t=t, steps=steps,
-                   exhausted=active & (steps > max_steps) | unresolved, unresolved=unresolved)
-
-
-def position_ulps(p, ulps):
-    """``ulps`` float32 units in the last place of the largest coordinate of ``p`` (plus 1e-6 m).
-
-    Rounding of a position, and of a field value computed from it, is a few ulps of
-    its largest coordinate: gradient taps (64 ulps: 1e-3 relative error) and ray
-    offsets (32: well above the noise of ``f``) scale with it, not with the scene's
-    size (issue 14: a fixed fraction of a 1000 km tile is metres, far coarser than a
-    close shot needs near the origin).
-    """
-    m = dr.maximum(dr.maximum(dr.abs(p.x), dr.abs(p.y)), dr.abs(p.z))
-    return ulps * 1.1920929e-7 * m + 1e-6
-
-
-def ray_box(o, d, lo, hi):
-    """Slab test: entry and exit distances of the ray ``o + t d`` through ``[lo, hi]``
-    (``lo``, ``hi``: three floats or three ``mi.Float``)."""
-    inv = dr.rcp(d)
-    t0 = (mi.Vector3f(*lo) - o) * inv
-    t1 = (mi.Vector3f(*hi) - o) * inv
-    tn = dr.minimum(t0, t1)
-    tf = dr.maximum(t0, t1)
-    return dr.max(tn), dr.min(tf)
 
 
 class SphereTracer:
@@ -193,40 +125,31 @@ class SphereTracer:
         t_start = dr.maximum(t_in, 0.0)
         t_end = dr.minimum(t_out, tmax)
         active = mi.Bool(active) & (t_start <= t_end)
+        return self._march(mi.Point3f(o), mi.Vector3f(d), t_start, t_end, active, cone)
+
+    @dr.syntax
+    def _march(self, o, d, t_start, t_end, active, cone):
+        """The loop of :meth:`query` over ``[t_start, t_end]``; see :mod:`.march`."""
         budget = self.max_steps * (1 + SECOND_PASS_FACTOR)
-        o, d = mi.Point3f(o), mi.Vector3f(d)
-
-        def body(t, t_prev, r_prev, step, omega, hit, alive, i):
-            f, (r,) = self.field.eval_bounds(o + d * t, (0.0,), d, self.footprint(cone, t))
-            failed = (omega > 1.0) & (r + r_prev < step)
-            # Relaxed step overshot: return to the last safe point, stop relaxing.
-            t_safe = t_prev + r_prev
-            new_hit = ~failed & (-f < self.tolerance(t, cone))
-            hit = hit | (alive & new_hit)
-            # Steps stop at t_end, so that a relaxed step past the end is still
-            # checked there before the ray may leave (else it could skip a surface).
-            t_next = dr.select(failed, t_safe, dr.minimum(t + omega * r, t_end))
-            step = dr.select(failed, r_prev, t_next - t)
-            t_prev = dr.select(failed, t_prev, t)
-            r_prev = dr.select(failed, r_prev, r)
-            # Over-relaxation resumes after a safe step: a failed step costs one
-            # plain step, not the relaxation of the rest of the ray.
-            omega = dr.select(failed, 1.0, omega0)
-            # On failure the next evaluation is at t_safe; step = r_prev makes the
-            # overlap test there trivially satisfied.
-            done = ~failed & (t >= t_end)  # [t_start, t_end] verified free
-            # The budget ends the loop (its condition), not ``alive``: a lane still alive
-            # when it runs out is what TraceResult.of reports as unresolved.
-            alive = alive & ~new_hit & ~done
-            t = dr.select(new_hit, t, t_next)
-            return t, t_prev, r_prev, step, omega, hit, alive, i + 1
-
-        omega0 = mi.Float(self.omega)
-        state = (mi.Float(t_start), mi.Float(t_start), mi.Float(0.0), mi.Float(0.0), mi.Float(omega0),
-                 mi.Bool(False), mi.Bool(active), mi.UInt32(0))
-        t, _, _, _, _, hit, alive, steps = dr.while_loop(state, lambda *s: s[6] & (s[7] < budget), body,
-                                                         label="sphere_trace")
-        return TraceResult.of(hit, t, steps, alive, active, self.max_steps)
+        march = March.start(t_start, self.omega)
+        hit = mi.Bool(False)
+        invalid = mi.Bool(False)
+        alive = mi.Bool(active)
+        steps = mi.UInt32(0)
+        # The budget ends the loop (its condition), not ``alive``: a lane still alive
+        # when it runs out is what TraceResult.of reports as unresolved.
+        while dr.hint(alive & (steps < budget), label="sphere_trace"):
+            f, (r,) = self.field.eval_bounds(o + d * march.t, (0.0,), d, self.footprint(cone, march.t))
+            march, out = relaxed_step(march, f, r, t_end, self.tolerance(march.t, cone), self.omega)
+            hit |= out.hit
+            invalid |= out.invalid
+            alive &= ~(out.hit | out.done | out.invalid)
+            steps += 1
+        unresolved = alive | invalid
+        # An unresolved ray stops at its verified frontier, never at a relaxed point
+        # that may lie past a thin wall.
+        t = dr.select(unresolved, dr.minimum(march.t, march.frontier), march.t)
+        return TraceResult.of(hit, t, steps, unresolved, active, self.max_steps)
 
     def trace(self, o, d, tmax, active, cone=None):
         """``(hit, t)`` of :meth:`query` (unresolved rays count as hits)."""

@@ -252,7 +252,8 @@ class ImplicitHeightfield(Heightfield):
         out = []
         for rad in radii:
             # The cell's 3x3 neighbourhood holds a ball of one cell edge.
-            S = S_near if rad <= self.cell_np else mi.Float(self.slope_bound)
+            # (rad may be a per-lane radius: a tracer's adaptive ball.)
+            S = dr.select(rad <= self.cell_np, S_near, self.slope_bound)
             Lh = dr.sqrt(1.0 + S * S) * (1.0 + 1e-6) * grow
             lo, hi = v - rad * Lh, v + rad * Lh
             ua = dr.select((lo <= 0.0) & (hi >= 0.0), 0.0, dr.minimum(dr.abs(lo), dr.abs(hi))) * self._inv_R

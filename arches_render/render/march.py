@@ -1,0 +1,216 @@
+"""What every field tracer shares: the over-relaxed sphere step, its loop state and its result.
+
+For a field ``f`` (positive inside) whose ``eval_bounds`` returns, at a point ``p`` of a
+ray, a free radius ``r`` along the ray's line (no point of ``{f >= 0}`` within ``|s| < r``
+of ``p`` on that line; a free ball is one such bound), a ray may advance by ``r``
+(Hart 1996). Over-relaxation (Keinert et al. 2014) advances by ``omega r`` instead;
+the step from ``t_prev`` to ``t`` was safe when the free intervals of the two points
+overlap,
+
+    r_prev + r >= t - t_prev,
+
+since then ``[t_prev, t]`` is covered by them. Otherwise the march returns to the
+last verified point ``t_prev + r_prev``, takes the plain step and relaxes again
+after it (a failed step costs one plain step, not the relaxation of the rest of
+the ray). At every moment ``[t_start, t_prev + r_prev]`` is proven free: that is the
+*verified frontier* a ray reports when its budget runs out.
+
+A step stops on the surface when ``-f < tol`` (a tolerance that grows with distance,
+chosen by the tracer) or when ``f >= 0`` (a ray that starts exactly on or inside the
+surface, where ``tol`` may be 0, would otherwise take zero-length steps forever), never
+on ``-f / L < tol``: a loose ``L`` would stop rays early and inflate thin features.
+A NaN ``f`` or ``r`` proves nothing: the step reports the lane *invalid*, and
+the tracer resolves it conservatively (an unresolved hit at its verified frontier),
+never as a miss: ``min(t + omega r, t_end)`` with a NaN ``r`` would otherwise jump to
+the end of the ray.
+
+Steps stop at ``t_end``, so that a relaxed step past the end is still checked there
+before the ray may leave (else it could skip a surface just before a mesh).
+
+References
+----------
+Hart, J. C. (1996). Sphere tracing. The Visual Computer 12(10).
+Keinert, B., Schäfer, H., Korndörfer, J., Ganse, U., Stamminger, M. (2014). Enhanced
+sphere tracing. STAG 2014, 1-8.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import drjit as dr
+import mitsuba as mi
+
+__all__ = ["SECOND_PASS_FACTOR", "March", "StepOutcome", "TraceResult", "position_ulps", "ray_box",
+           "relaxed_step"]
+
+#: A ray that exhausts ``max_steps`` goes on for this many times more steps.
+SECOND_PASS_FACTOR = 16
+
+
+@dataclass
+class TraceResult:
+    """What a ray query found, per lane.
+
+    Attributes
+    ----------
+    hit : mi.Bool
+        A surface was met (unresolved rays included: they are conservative hits).
+    t : mi.Float
+        Distance of the hit (for unresolved rays, of their verified frontier).
+    steps : mi.UInt32
+        Field evaluations the ray took (sphere steps); the step budgets count these.
+    exhausted : mi.Bool
+        The ray used up its first budget (``max_steps``).
+    unresolved : mi.Bool
+        The ray used up the second budget too, or met a value that proves nothing
+        (NaN), or a traversal's iteration guard; it was resolved as a hit.
+    cells : mi.UInt32
+        Cheap iterations besides the steps: cells a structure or a heightfield cast
+        visited without evaluating the field (0 for a plain sphere tracer).
+    """
+
+    hit: object
+    t: object
+    steps: object
+    exhausted: object
+    unresolved: object
+    cells: object = None
+
+    @classmethod
+    def of(cls, hit, t, steps, unresolved, active, max_steps, cells=None):
+        """The result of a loop that ended with ``unresolved`` lanes (still alive at its
+        end, or stopped without proof)."""
+        unresolved = mi.Bool(unresolved) & active
+        return cls(hit=(mi.Bool(hit) | unresolved) & active, t=t, steps=mi.UInt32(steps),
+                   exhausted=active & (steps > max_steps) | unresolved, unresolved=unresolved,
+                   cells=mi.UInt32(0) if cells is None else mi.UInt32(cells))
+
+
+def position_ulps(p, ulps):
+    """``ulps`` float32 units in the last place of the largest coordinate of ``p`` (plus 1e-6 m).
+
+    Rounding of a position, and of a field value computed from it, is a few ulps of
+    its largest coordinate: gradient taps (64 ulps: 1e-3 relative error) and ray
+    offsets (32: well above the noise of ``f``) scale with it, not with the scene's
+    size (issue 14: a fixed fraction of a 1000 km tile is metres, far coarser than a
+    close shot needs near the origin).
+    """
+    m = dr.maximum(dr.maximum(dr.abs(p.x), dr.abs(p.y)), dr.abs(p.z))
+    return ulps * 1.1920929e-7 * m + 1e-6
+
+
+def ray_box(o, d, lo, hi):
+    """Slab test: entry and exit distances of the ray ``o + t d`` through ``[lo, hi]``
+    (``lo``, ``hi``: three floats or three ``mi.Float``)."""
+    inv = dr.rcp(d)
+    t0 = (mi.Vector3f(*lo) - o) * inv
+    t1 = (mi.Vector3f(*hi) - o) * inv
+    tn = dr.minimum(t0, t1)
+    tf = dr.maximum(t0, t1)
+    return dr.max(tn), dr.min(tf)
+
+
+@dataclass
+class March:
+    """The loop state of an over-relaxed sphere march, per lane (module docstring).
+
+    Attributes
+    ----------
+    t : mi.Float
+        Where the field is evaluated next (a relaxed point: not yet verified).
+    t_prev : mi.Float
+        The last point whose free radius ``r_prev`` was accepted.
+    r_prev : mi.Float
+        Its free radius along the ray; ``t_prev + r_prev`` is the verified frontier.
+    step : mi.Float
+        ``t - t_prev``, what the overlap test must cover.
+    omega : mi.Float
+        The relaxation of the step that led to ``t`` (1 after a failed step).
+    """
+
+    t: object = field(default_factory=lambda: mi.Float())
+    t_prev: object = field(default_factory=lambda: mi.Float())
+    r_prev: object = field(default_factory=lambda: mi.Float())
+    step: object = field(default_factory=lambda: mi.Float())
+    omega: object = field(default_factory=lambda: mi.Float())
+
+    @classmethod
+    def start(cls, t, omega):
+        """A march about to evaluate the field at ``t`` (nothing to verify yet)."""
+        # Dr.Jit traverses loop state through DRJIT_STRUCT; its types belong to the
+        # variant chosen at run time, so it is declared here, not at import.
+        cls.DRJIT_STRUCT = {name: mi.Float for name in ("t", "t_prev", "r_prev", "step", "omega")}
+        t = mi.Float(t)
+        return cls(t=mi.Float(t), t_prev=mi.Float(t), r_prev=dr.zeros(mi.Float, dr.width(t)),
+                   step=dr.zeros(mi.Float, dr.width(t)), omega=mi.Float(omega) + dr.zeros(mi.Float, dr.width(t)))
+
+    @property
+    def frontier(self):
+        """``t_prev + r_prev``: the ray is proven free up to here."""
+        return self.t_prev + self.r_prev
+
+
+@dataclass
+class StepOutcome:
+    """What one :func:`relaxed_step` decided, per lane.
+
+    Attributes
+    ----------
+    hit : mi.Bool
+        The surface is at ``march.t`` (within the tolerance, or the point is inside).
+    done : mi.Bool
+        ``[t_start, t_end]`` is proven free: the ray leaves.
+    invalid : mi.Bool
+        The field returned a value that proves nothing (NaN): the lane
+        must be resolved conservatively.
+    failed : mi.Bool
+        The relaxed step that led to ``march.t`` overshot: the march went back to
+        its verified frontier.
+    """
+
+    hit: object
+    done: object
+    invalid: object
+    failed: object
+
+
+def relaxed_step(march, f, r, t_end, tol, omega0):
+    """One over-relaxed sphere step from the field's answer at ``march.t`` (module docstring).
+
+    Parameters
+    ----------
+    march : March
+        The state before the step (not modified).
+    f, r : mi.Float
+        The field's value and free radius along the ray at ``march.t``.
+    t_end : mi.Float
+        The end of the ray's interval.
+    tol : mi.Float
+        The hit tolerance at ``march.t``.
+    omega0 : float or mi.Float
+        The relaxation to use after a verified step.
+
+    Returns
+    -------
+    (March, StepOutcome)
+        The state after the step (unchanged where the step hit or was invalid) and
+        its outcome.
+    """
+    m = march
+    # (An infinite free radius is a proof: the whole line is free.)
+    invalid = dr.isnan(f) | dr.isnan(r)
+    failed = ~invalid & (m.omega > 1.0) & (r + m.r_prev < m.step)
+    hit = ~failed & ~invalid & ((-f < tol) | (f >= 0.0))
+    # Relaxed step overshot: return to the verified frontier, step plainly from there.
+    t_next = dr.select(failed, m.frontier, dr.minimum(m.t + m.omega * r, t_end))
+    done = ~failed & ~hit & ~invalid & (m.t >= t_end)
+    stay = hit | invalid
+    out = March(t=dr.select(stay, m.t, t_next),
+                t_prev=dr.select(failed | stay, m.t_prev, m.t),
+                r_prev=dr.select(failed | stay, m.r_prev, r),
+                # After a failure the next evaluation is at the frontier: step = r_prev
+                # makes the overlap test there trivially satisfied.
+                step=dr.select(stay, m.step, dr.select(failed, m.r_prev, t_next - m.t)),
+                omega=dr.select(stay, m.omega, dr.select(failed, 1.0, omega0)))
+    return out, StepOutcome(hit=hit, done=done, invalid=invalid, failed=failed)
