@@ -61,7 +61,7 @@ import numpy as np
 from numba import njit
 
 from arches_render.backend import variant
-from arches_render.field.node import Node, hart_bounds, opaque_float
+from arches_render.field.node import Node, box_distance, hart_bounds, opaque_float
 
 from .material_stacks import SOLID, MaterialStacks
 
@@ -261,6 +261,7 @@ class ConvolutionSurface(Node):
         else:
             self._box = (np.array([x0, y0, z0]), np.array([x0, y0, z0]))
         self._coarse = _CoarseDistance(self.sums.np, stacks, sigma)
+        self._bounds_op = tuple([opaque_float(v) for v in b] for b in self.bounds())
 
     @property
     def fast_path_fractions(self) -> dict:
@@ -303,8 +304,12 @@ class ConvolutionSurface(Node):
         code, S = self._coarse.lookup(p)
         f = self._value(p, code)
         hart = hart_bounds(f, levels, self.lipschitz)
-        # With the tilt, F >= -c needs V > 0 only while c + tilt_shift < sigma.
-        free = self._coarse.free_distance(p, S, direction) - self._sigma
+        # With the tilt, F >= -c needs V > 0 only while c + tilt_shift < sigma: matter
+        # in the point's cube, so the point lies in the empty box of the coarse grid's
+        # distance transform or in bounds() (matter's box grown by sigma), whose
+        # distance holds outside the grid, where the clamped cells say nothing.
+        free = dr.maximum(self._coarse.free_distance(p, S, direction) - self._sigma,
+                          box_distance(p, *self._bounds_op))
         ds = tuple(dr.maximum(h, dr.select(self._sigma > c + self.tilt_shift, dr.maximum(free, 0.0), 0.0))
                    for h, c in zip(hart, levels))
         return f, ds
