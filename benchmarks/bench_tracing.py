@@ -25,6 +25,33 @@
                       The Salish Sea DEM is amplified with ``--max-cells 3000`` (at
                       full size its sea erosion alone takes minutes).
 
+                      Extra fields per scene: ``cells_build_s`` and ``cells_mb``, the
+                      surface cells' build time and memory (issue 32: built once a
+                      scene), against ``mesh_mb``, the marching-cubes mesh's.
+
+``trace_steps_by_ray_type``  (issue 32) steps (field evaluations) per ray of camera,
+                      shadow and bounce rays (``benchmarks/ray_steps.py``: 320x180, one
+                      camera ray a pixel, a shadow ray to the sun and a cosine bounce
+                      from each hit) on ``fig23_goblins``, ``every_generator`` and the
+                      amplified NM canyon, with the sphere tracer and with the cell
+                      tracer (surface cells) in the same run. Value: the largest mean
+                      of shadow steps with the renderer's tracer; baseline: the goal,
+                      20. Extra fields: mean and 99th percentile per scene, tracer and
+                      ray type.
+``render_field_vs_sdfgrid``  (issue 32) the default scene traced by ``implicit_path``
+                      against the same field sampled at the mesh voxel and rendered as
+                      Mitsuba's own ``sdfgrid`` shape (320x180, 16 spp, warm): field
+                      seconds over sdfgrid seconds; baseline: the goal, 1.
+``render_landscape_end_to_end``  (issue 32) per landscape (the gallery and the real
+                      DEMs), the field path (scene build: the tracer's structures
+                      included, plus the render) over the mesh path (polygonization at
+                      the scene's mesh voxel plus the render), at
+                      ``ARCHES_BENCH_E2E="WxH,SPP"`` (default ``1280x720,16``) and the
+                      scenes of ``ARCHES_BENCH_LANDSCAPE_SCENES``; cold builds, warm
+                      kernels (each path renders once at 16x9 first). Value: the median
+                      ratio; baseline: 1.0 (the aim beyond issue 32). Extra fields:
+                      per-scene ratios and seconds.
+
 Timings taken while other processes load the machine are inflated: compare the
 ratios of one run, and read ``load`` beside them.
 """
@@ -121,6 +148,22 @@ def _landscape_scenes(tmp):
     return scenes
 
 
+def _structure_and_mesh_size(desc, mesh_scene):
+    """``{cells_build_s, cells_mb, mesh_mb}``: the surface cells of the scene's field (as
+    the cell tracer builds them) against its marching-cubes mesh in ``mesh_scene``."""
+    from arches_render.render.cell_tracer import CellTracer
+    r = desc.render
+    t0 = time.perf_counter()
+    tracer = CellTracer(desc.field, eps=r.eps, omega=r.omega, max_steps=r.max_steps)
+    built = time.perf_counter() - t0
+    params = mi.traverse(mesh_scene)
+    mesh_bytes = sum(4 * dr.width(params[k]) for k in params.keys()
+                     if k.startswith("field_mesh.") and k.split(".")[-1] in ("vertex_positions", "vertex_normals",
+                                                                              "faces"))
+    return dict(cells_build_s=round(built, 2), cells_mb=round(tracer.cells.nbytes() / 1e6, 2),
+                mesh_mb=round(mesh_bytes / 1e6, 2))
+
+
 def bench_render_landscape_field_vs_mesh(repeat):
     import tempfile
 
@@ -132,11 +175,12 @@ def bench_render_landscape_field_vs_mesh(repeat):
     w, h = (int(v) for v in size.split("x"))
     spp = int(spp)
     load0 = os.getloadavg()[0]
-    ratios, rates, counts = {}, [], {"exhausted": 0, "unresolved": 0}
+    ratios, rates, counts, structure = {}, [], {"exhausted": 0, "unresolved": 0}, {}
     with tempfile.TemporaryDirectory() as tmp:
         for name, path in _landscape_scenes(tmp).items():
             desc = load_scene(path)
             field, mesh = build_scene(desc, "field", w, h), build_scene(desc, "mesh", w, h)
+            structure[name] = _structure_and_mesh_size(desc, mesh)
             tf = tm = 0.0
             for cam in desc.cameras.values():
                 for scene in (field, mesh):
@@ -160,10 +204,92 @@ def bench_render_landscape_field_vs_mesh(repeat):
                 worst=max(values), worst_goal=2.5, per_scene=ratios,
                 field_samples_per_s=round(statistics.median(rates)), resolution=f"{w}x{h}", spp=spp,
                 primary_exhausted_1spp=counts["exhausted"], primary_unresolved_1spp=counts["unresolved"],
+                structure=structure,
+                load=round(0.5 * (load0 + os.getloadavg()[0]), 2))
+
+
+def bench_trace_steps_by_ray_type(repeat):
+    import tempfile
+
+    from arches_render.render.cell_tracer import CellTracer
+    from arches_render.render.heightfield_caster import make_tracer
+    from arches_render.scene import load_scene
+    from ray_steps import ray_steps
+    out, worst = {}, 0.0
+    with tempfile.TemporaryDirectory() as tmp:
+        os.environ["ARCHES_BENCH_LANDSCAPE_SCENES"] = "fig23_goblins,every_generator,real_nm_canyon_10m"
+        try:
+            scenes = _landscape_scenes(tmp)
+        finally:
+            del os.environ["ARCHES_BENCH_LANDSCAPE_SCENES"]
+        for name, path in scenes.items():
+            desc = load_scene(path)
+            r = desc.render
+            tracers = {"renderer": make_tracer(desc.field, eps=r.eps, omega=r.omega, max_steps=r.max_steps,
+                                               cells=r.surface_cells),
+                       "sphere": SphereTracer(desc.field, eps=r.eps, omega=r.omega, max_steps=r.max_steps),
+                       "cells": CellTracer(desc.field, eps=r.eps, omega=r.omega, max_steps=r.max_steps)}
+            for label, tracer in tracers.items():
+                for kind, st in ray_steps(desc, tracer).items():
+                    out[f"{name}.{label}.{kind}"] = [round(st["mean"], 1), round(st["p99"], 1)]
+                    if label == "renderer" and kind == "shadow":
+                        worst = max(worst, st["mean"])
+    return dict(value=worst, unit="steps", baseline=20.0, baseline_is="goal (shadow rays, mean)",
+                fields="[mean, p99]", **out, load=round(os.getloadavg()[0], 2))
+
+
+def bench_render_field_vs_sdfgrid(repeat):
+    from arches_render.render.renderer import build_scene
+    from arches_render.scene import load_scene
+    from arches_render.timing import REPO, median_renders
+    desc = load_scene(REPO / "scenes" / "default.toml")
+    w, h, spp = 320, 180, 16
+    load0 = os.getloadavg()[0]
+    t0 = time.perf_counter()
+    field = build_scene(desc, "field", w, h)
+    t1 = time.perf_counter()
+    grid = build_scene(desc, "sdfgrid", w, h)
+    t2 = time.perf_counter()
+    a, b = median_renders([field, grid], spp, repeat, warm_spp=spp)
+    return dict(value=a / b, unit="x", baseline=1.0, baseline_is="goal", field_s=a, sdfgrid_s=b,
+                field_setup_s=t1 - t0, sdfgrid_setup_s=t2 - t1, resolution=f"{w}x{h}", spp=spp,
+                load=round(0.5 * (load0 + os.getloadavg()[0]), 2))
+
+
+def bench_render_landscape_end_to_end(repeat):
+    import tempfile
+
+    from arches_render.render.renderer import build_scene, render_image
+    from arches_render.scene import load_scene
+    size, spp = os.environ.get("ARCHES_BENCH_E2E", "1280x720,16").split(",")
+    w, h = (int(v) for v in size.split("x"))
+    spp = int(spp)
+    load0 = os.getloadavg()[0]
+    ratios, seconds = {}, {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, path in _landscape_scenes(tmp).items():
+            desc = load_scene(path)
+            for geometry in ("field", "mesh"):  # kernels warm, builds cold
+                render_image(build_scene(desc, geometry, 16, 9), 1, seed=1)
+            times = {}
+            for geometry in ("field", "mesh"):
+                t0 = time.perf_counter()
+                scene = build_scene(desc, geometry, w, h)
+                t1 = time.perf_counter()
+                render_image(scene, spp, seed=1)
+                times[geometry] = (t1 - t0, time.perf_counter() - t1)
+                del scene
+            ratios[name] = round(sum(times["field"]) / sum(times["mesh"]), 3)
+            seconds[name] = {g: [round(v, 2) for v in t] for g, t in times.items()}
+    return dict(value=statistics.median(ratios.values()), unit="x", baseline=1.0, baseline_is="aim",
+                per_scene=ratios, seconds_build_render=seconds, resolution=f"{w}x{h}", spp=spp,
                 load=round(0.5 * (load0 + os.getloadavg()[0]), 2))
 
 
 BENCHMARKS = {
     "lod_octaves_cost": (bench_lod_octaves_cost, 5),
     "render_landscape_field_vs_mesh": (bench_render_landscape_field_vs_mesh, 2),
+    "trace_steps_by_ray_type": (bench_trace_steps_by_ray_type, 1),
+    "render_field_vs_sdfgrid": (bench_render_field_vs_sdfgrid, 3),
+    "render_landscape_end_to_end": (bench_render_landscape_end_to_end, 1),
 }

@@ -149,3 +149,53 @@ def test_culling_keeps_values_near_surfaces(tol):
     fc, _ = culled.eval_bounds(_points(pts[near]), ())
     # Same float32 operations in a different kernel: agreement to rounding only.
     np.testing.assert_allclose(fc.numpy(), f[near], atol=1e-5)
+
+
+def box_range_violations(node, lo, hi, n=300, m=48, seed=4, scale=(0.01, 0.3)):
+    """Boxes inside ``[lo, hi]`` where a value sampled in the box leaves ``box_range``."""
+    from arches_render.field.lod import Footprint  # noqa: F401  (the same variant)
+    rng = np.random.default_rng(seed)
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    size = rng.uniform(*scale, (n, 1)) * np.max(hi - lo)
+    c = rng.uniform(lo, hi, (n, 3))
+    blo = c - size * rng.uniform(0.1, 1.0, (n, 3))
+    bhi = c + size * rng.uniform(0.1, 1.0, (n, 3))
+    a, b = node.box_range(_points(blo), _points(bhi))
+    a, b = (np.broadcast_to(np.asarray(x.numpy() if hasattr(x, "numpy") else x, np.float64), (n,)) for x in (a, b))
+    pts = (blo[:, None] + rng.uniform(0, 1, (n, m, 3)) * (bhi - blo)[:, None]).reshape(-1, 3)
+    f = node.eval_bounds(_points(pts), ())[0].numpy().reshape(n, m).astype(np.float64)
+    slack = 1e-4 * (1.0 + np.abs(f))
+    return int(np.count_nonzero(np.any((f < a[:, None] - slack) | (f > b[:, None] + slack), axis=1))), \
+        float(np.median(b - a))
+
+
+@pytest.mark.parametrize("name", sorted(NODES))
+def test_box_range_holds(name):
+    """Interval arithmetic through the tree: every value in a box lies in its range."""
+    node = NODES[name]
+    lo, hi = (np.full(3, -5.0), np.full(3, 5.0)) if name == "noise" else node.bounds()
+    bad, width = box_range_violations(node, np.asarray(lo) - 1.0, np.asarray(hi) + 1.0)
+    assert bad == 0
+    assert np.isfinite(width)
+
+
+@pytest.mark.parametrize("name", ["noise", "displace", "warp", "culled_blend"])
+@pytest.mark.parametrize("radius", [0.05, 0.3, 2.0])
+def test_lod_error_bounds_every_footprint_field(name, radius):
+    """``|F_fp - F| <= local_lod_error`` for footprints of radius up to ``radius``."""
+    from arches_render.field.lod import Footprint
+    node = NODES[name]
+    rng = np.random.default_rng(8)
+    p = _points(rng.uniform(-3, 3, (4000, 3)))
+    full = node.eval_bounds(p, ())[0].numpy()
+    bound = node.local_lod_error(p, 0.0, radius)
+    bound = np.broadcast_to(np.asarray(bound.numpy() if hasattr(bound, "numpy") else bound), full.shape)
+    assert node.lod_error(radius) >= bound.max() - 1e-6
+    for r in (radius, 0.5 * radius, 0.1 * radius):
+        fp = Footprint(mi.Float(r), mi.Float(0.0))
+        f_fp = node.eval_bounds(p, (), footprint=fp)[0].numpy()
+        assert np.all(np.abs(f_fp - full) <= bound + 1e-4 * (1 + np.abs(full)))
+    if name != "culled_blend":
+        # Footprints that drop octaves move the field (the bound is not vacuous).
+        fp = Footprint(mi.Float(radius), mi.Float(0.0))
+        assert np.abs(node.eval_bounds(p, (), footprint=fp)[0].numpy() - full).max() > 0.0 or radius < 0.1

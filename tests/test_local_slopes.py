@@ -23,7 +23,8 @@ import mitsuba as mi  # noqa: E402
 from arches_render.field import evaluate  # noqa: E402
 from arches_render.generators.terrain.falloff import energy_for_radius  # noqa: E402
 from arches_render.generators.terrain.implicit_heightfield import ImplicitHeightfield  # noqa: E402
-from arches_render.generators.terrain.operators import Sum, eval_local  # noqa: E402
+from arches_render.field.local_slopes import eval_local  # noqa: E402
+from arches_render.generators.terrain.operators import Sum  # noqa: E402
 from arches_render.generators.terrain.skeletal_set import SkeletalSet  # noqa: E402
 from arches_render.render.sphere_tracer import SphereTracer  # noqa: E402
 

@@ -512,3 +512,40 @@ def test_same_seed_same_field_other_seed_differs():
     v = evaluate(NOISY, p)
     np.testing.assert_array_equal(evaluate(again, p), v)
     assert np.abs(evaluate(other, p) - v).max() > 1e-2
+
+
+# -- value ranges over boxes and footprint errors (surface cells, issue 32) ------------------
+@pytest.mark.parametrize("name", ["terrain", "noisy_set", "erosion", "sum", "local_warp", "hoodoos", "sculpted"])
+def test_box_range_holds(name):
+    """Every value sampled in a box lies in the node's ``box_range`` of that box, for
+    boxes from a metre to a fifth of the scene (the terrain's pyramids pick levels)."""
+    from test_field_bounds import box_range_violations
+    node, lo, hi = LIPSCHITZ_CASES[name]
+    for scale in ((0.005, 0.03), (0.03, 0.2)):
+        bad, width = box_range_violations(node, lo, hi, scale=scale, seed=hash(name) % 100)
+        assert bad == 0, (scale, bad)
+    if name == "terrain":
+        # Tight where it matters: boxes of a few metres span a few metres of value.
+        assert width < 12.0
+
+
+@pytest.mark.parametrize("name", ["terrain", "noisy_set", "sum", "hoodoos", "sculpted"])
+def test_local_lod_error_bounds_every_footprint_field(name):
+    """``|F_fp - F| <= local_lod_error`` for footprints up to the radius, and 0 away from
+    a primitive set's supports."""
+    import mitsuba as mi
+
+    from arches_render.field.lod import Footprint
+    node, lo, hi = LIPSCHITZ_CASES[name]
+    rng = np.random.default_rng(11)
+    pts = rng.uniform(lo, hi, (6000, 3)).astype(np.float32)
+    p = mi.Point3f(*(mi.Float(pts[:, i]) for i in range(3)))
+    full = node.eval_bounds(p, ())[0].numpy()
+    for radius in (0.3, 1.5, 6.0):
+        bound = node.local_lod_error(p, 0.0, radius)
+        bound = np.broadcast_to(np.asarray(bound.numpy() if hasattr(bound, "numpy") else bound), full.shape)
+        for r in (radius, 0.4 * radius):
+            f_fp = node.eval_bounds(p, (), footprint=Footprint(mi.Float(r), mi.Float(0.0)))[0].numpy()
+            assert np.all(np.abs(f_fp - full) <= bound + 1e-4 * (1 + np.abs(full))), (radius, r)
+    if name == "hoodoos":
+        assert (bound == 0.0).mean() > 0.2   # local: nothing to fear far from the supports

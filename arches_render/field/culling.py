@@ -29,7 +29,7 @@ import copy
 
 import drjit as dr
 
-from .node import Node, box_distance, finite_box, opaque_float
+from .node import Node, box_distance, box_gap, box_reach, finite_box, opaque_float
 from .operators import Blend, SmoothIntersection
 
 #: Relative cost (one exact primitive = 1) above which a bounded subtree is culled.
@@ -66,6 +66,17 @@ class Culled(Node):
 
     def bounds(self):
         return self.children[0].bounds()
+
+    def box_range(self, lo, hi):
+        # The values eval_bounds answers (what tracers see): the child's within the
+        # margin of its box, -dist(p, B) beyond; a box may hold both.
+        gap, far = box_gap(lo, hi, self._lo, self._hi), box_reach(lo, hi, self._lo, self._hi)
+        a, b = self.children[0].box_range(lo, hi)
+        beyond = gap > self._margin
+        within = far <= self._margin
+        lo_v = dr.select(beyond, -far, dr.select(within, a, dr.minimum(a, -far)))
+        hi_v = dr.select(beyond, -gap, dr.select(within, b, dr.maximum(b, -self._margin)))
+        return lo_v, hi_v
 
     @property
     def lipschitz(self):

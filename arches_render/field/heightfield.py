@@ -179,6 +179,48 @@ class Heightfield(Node):
             ds.append(d)
         return dr.minimum(top, box), tuple(ds)
 
+    def height_range(self, xlo, xhi, ylo, yhi):
+        """``(h_min, h_max)`` of the bilinear elevation over the rectangles
+        ``[xlo, xhi] x [ylo, yhi]`` (``mi.Float`` each), from the maximum and minimum
+        pyramids (:class:`~.heightfield_mipmap.MaxMipmap`): the level whose cells
+        are at least as wide as the rectangle's span of cells, where at most 2 x 2
+        cells cover it (lookups outside the grid clamp to its edge, as ``height``)."""
+        if getattr(self, "_pyramid", None) is None:
+            from .heightfield_mipmap import MaxMipmap  # (that module imports this one)
+            mm = MaxMipmap(self.heights_np)
+            self._pyramid = (mm, mi.Float(mm.max_flat), mi.Float(mm.min_flat))
+        mm, mx, mn = self._pyramid
+        ncx, ncy = self.nx - 1, self.ny - 1
+
+        def cell(v, v0, inv, n):
+            return mi.Int32(dr.clip(dr.floor((v - v0) * inv), 0.0, n - 1.0))
+
+        i0, i1 = cell(xlo, self._x0, self._inv_dx, ncx), cell(xhi, self._x0, self._inv_dx, ncx)
+        j0, j1 = cell(ylo, self._y0, self._inv_dy, ncy), cell(yhi, self._y0, self._inv_dy, ncy)
+        span = dr.maximum(i1 - i0, j1 - j0)
+        level = mi.Int32(0)
+        for lvl in range(1, mm.levels):
+            level = dr.select(span >= (1 << (lvl - 1)), lvl, level)
+        offset, row = mi.UInt32(0), mi.Int32(mm.shapes[0][1])
+        for lvl in range(1, mm.levels):
+            offset = dr.select(level == lvl, int(mm.offsets[lvl]), offset)
+            row = dr.select(level == lvl, mm.shapes[lvl][1], row)
+        a0, a1, b0, b1 = i0 >> level, i1 >> level, j0 >> level, j1 >> level
+        h_min, h_max = mi.Float(dr.inf), mi.Float(-dr.inf)
+        for i, j in ((a0, b0), (a1, b0), (a0, b1), (a1, b1)):
+            k = offset + mi.UInt32(j * row + i)
+            h_min = dr.minimum(h_min, dr.gather(mi.Float, mn, k))
+            h_max = dr.maximum(h_max, dr.gather(mi.Float, mx, k))
+        return h_min, h_max
+
+    def box_range(self, lo, hi):
+        # min(h - z, box): h from the pyramids, the box's exact distance (1-Lipschitz)
+        # at the centre plus or minus the half-diagonal.
+        h_min, h_max = self.height_range(lo.x, hi.x, lo.y, hi.y)
+        b = self._box((lo + hi) * 0.5)
+        R = dr.norm(hi - lo) * 0.5
+        return dr.minimum(h_min - hi.z, b - R), dr.minimum(h_max - lo.z, b + R)
+
     def bounds(self):
         x0, y0, x1, y1 = self.extent
         return np.array([x0, y0, self.base_np]), np.array([x1, y1, self.top_np])

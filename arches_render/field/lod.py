@@ -184,6 +184,17 @@ class OctaveLOD:
         """Slope bound of the truncated sum everywhere: ``S_full + s c Q_K``."""
         return self.full_slope + footprint.rate * self._Q[-1]
 
+    def error_within(self, radius: float) -> float:
+        """Bound of ``|truncated - full|`` for every footprint of radius at most ``radius``
+        (metres), as a Python float: the error at ``radius`` (it grows with the
+        footprint: a wider cone drops more octaves)."""
+        if not self.enabled or radius <= 0.0:
+            return 0.0
+        x = (self._log_ratio - math.log2(radius)) * self._inv_log2_l
+        n = int(min(max(math.floor(x), 0), self.octaves))
+        w = min(max(x - n, 0.0), 1.0)
+        return max(self._T[n] - w * self._G[n], 0.0)
+
     def error(self, x):
         """Bound of ``|truncated - full|`` at level ``x`` (module docstring, "Its
         error"), as ``mi.Float``; ``x = None`` (full detail): 0."""

@@ -14,6 +14,14 @@ questions:
     a guaranteed bound ``L`` with ``|f(a) - f(b)| <= L |a - b|`` for all ``a, b``,
     derived from the math of the node and of its children, never measured from
     samples (a measured bound can tunnel through thin features).
+``box_range(lo, hi)``
+    ``(f_min, f_max)``: bounds of the node's (full-detail) values over the boxes
+    ``[lo, hi]`` (``mi.Point3f`` each, one box a lane), from interval arithmetic
+    through the operators and what leaves know of their values (a heightfield its
+    maximum mipmap, a primitive set its empty cells); the default is Hart's, the
+    value at the box's centre plus or minus the slope bound in the ball around it.
+    A structure that classifies cells (:mod:`~arches_render.field.surface_cells`)
+    asks it.
 ``eval_bounds(p, levels)``
     ``(f, ds)``: the value and, for each ``c`` in ``levels``, a *local* lower bound
     ``d >= 0`` of the distance from ``p`` to the super-level set ``{f >= -c}``
@@ -89,6 +97,17 @@ class Node:
         f = self.eval(p)
         return f, hart_bounds(f, levels, self.lipschitz)
 
+    def box_range(self, lo, hi):
+        """``(f_min, f_max)`` of :meth:`eval` over the boxes ``[lo, hi]`` (module docstring):
+        this default is ``f(c) -+ S R`` with ``c`` the box's centre, ``R`` its
+        half-diagonal and ``S`` the node's slope bound in the ball ``B(c, R)``, which
+        holds the box."""
+        from .local_slopes import eval_local  # (it knows nodes only through this protocol)
+        c = (lo + hi) * 0.5
+        R = dr.norm(hi - lo) * 0.5
+        f, _, (S,) = eval_local(self, mi.Point3f(c), (), None, None, (R,))
+        return f - S * R, f + S * R
+
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Axis-aligned box ``(lo, hi)`` containing every point where ``f > 0``."""
         raise NotImplementedError
@@ -113,6 +132,35 @@ class Node:
         node's footprint field is ``L (1 + kappa s)``-Lipschitz (0: no level of detail
         in this subtree, the field is the full one)."""
         return max((c.lod_kappa for c in self.children), default=0.0)
+
+    def lod_error(self, radius: float) -> float:
+        """A bound of ``|F_fp - F|``, how far the node's footprint field
+        (:mod:`~arches_render.field.lod`) can lie from its full field for any
+        footprint of radius at most ``radius`` (metres), as a Python float; 0 without
+        level of detail in the subtree.
+
+        This default sums the children's: right for every operator whose value moves
+        by at most the sum of its operands' moves (max, min, smooth maxima, sums,
+        differences, offsets, culling). Nodes that scale their children's values or
+        warp their points, and leaves with octaves of their own, override it."""
+        if not self.lod_kappa:
+            return 0.0
+        return sum(c.lod_error(radius) for c in self.children)
+
+    def local_lod_error(self, p, reach: float, radius: float):
+        """:meth:`lod_error` near ``p``: a bound of ``|F_fp - F|`` within ``reach`` of the
+        points ``p`` (``mi.Point3f``), per lane (``mi.Float``, or a float where it is
+        the same everywhere). Nodes whose octaves act in a small region (a primitive
+        set's noise) answer 0 away from it; operators that sum their operands' errors
+        sum these; other nodes answer their global bound."""
+        if not self.lod_kappa:
+            return 0.0
+        if type(self).lod_error is not Node.lod_error:
+            return self.lod_error(radius)
+        total = 0.0
+        for c in self.children:
+            total = total + c.local_lod_error(p, reach, radius)
+        return total
 
     @property
     def cost(self) -> float:
@@ -166,6 +214,25 @@ def finite_box(node) -> tuple[np.ndarray, np.ndarray] | None:
     if np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)):
         return lo, hi
     return None
+
+
+def box_gap(lo, hi, box_lo, box_hi):
+    """Euclidean distance between the boxes ``[lo, hi]`` (``mi.Point3f``, per lane) and
+    ``[box_lo, box_hi]`` (three ``mi.Float`` each): 0 where they touch."""
+    return dr.norm(mi.Vector3f(*(dr.maximum(dr.maximum(box_lo[i] - hi[i], lo[i] - box_hi[i]), 0.0)
+                                 for i in range(3))))
+
+
+def box_reach(lo, hi, box_lo, box_hi):
+    """Largest distance from a point of the boxes ``[lo, hi]`` (``mi.Point3f``, per lane)
+    to the box ``[box_lo, box_hi]`` (three ``mi.Float``): the distance to a box is
+    convex, so it is the largest over the eight corners."""
+    far = mi.Float(0.0)
+    for x in (lo.x, hi.x):
+        for y in (lo.y, hi.y):
+            for z in (lo.z, hi.z):
+                far = dr.maximum(far, box_distance(mi.Point3f(x, y, z), box_lo, box_hi))
+    return far
 
 
 def box_union(boxes):

@@ -62,6 +62,14 @@ class _NAry(Node):
 class _Lattice(_NAry):
     """Union or intersection: one combinator for values, its dual for distances."""
 
+    def box_range(self, lo, hi):
+        # max and min are monotone in every operand: apply them to the ends.
+        a, b = self.children[0].box_range(lo, hi)
+        for c in self.children[1:]:
+            ca, cb = c.box_range(lo, hi)
+            a, b = self._value(a, ca), self._value(b, cb)
+        return a, b
+
     def eval(self, p):
         v = self.children[0].eval(p)
         for c in self.children[1:]:
@@ -124,6 +132,13 @@ class Difference(_NAry):
             v = dr.minimum(v, -c.eval(p))
         return v
 
+    def box_range(self, lo, hi):
+        a, b = self.children[0].box_range(lo, hi)
+        for c in self.children[1:]:
+            ca, cb = c.box_range(lo, hi)
+            a, b = dr.minimum(a, -cb), dr.minimum(b, -ca)
+        return a, b
+
     def eval_bounds(self, p, levels, direction=None, footprint=None):
         # The subtracted operands keep full detail (``eval``): their bound needs
         # their true value, which a culled subtree's far answer is not.
@@ -156,6 +171,14 @@ class Blend(_NAry):
         for c in self.children[1:]:
             v = smooth_max(v, c.eval(p), self.radius)
         return v
+
+    def box_range(self, lo, hi):
+        # smax_k is non-decreasing in both arguments (module docstring).
+        a, b = self.children[0].box_range(lo, hi)
+        for c in self.children[1:]:
+            ca, cb = c.box_range(lo, hi)
+            a, b = smooth_max(a, ca, self.radius), smooth_max(b, cb, self.radius)
+        return a, b
 
     def eval_bounds(self, p, levels, direction=None, footprint=None):
         m = len(levels)
@@ -199,6 +222,13 @@ class SmoothIntersection(_NAry):
         for c in self.children[1:]:
             v = -smooth_max(-v, -c.eval(p), self.radius)
         return v
+
+    def box_range(self, lo, hi):
+        a, b = self.children[0].box_range(lo, hi)
+        for c in self.children[1:]:
+            ca, cb = c.box_range(lo, hi)
+            a, b = -smooth_max(-a, -ca, self.radius), -smooth_max(-b, -cb, self.radius)
+        return a, b
 
     def eval_bounds(self, p, levels, direction=None, footprint=None):
         # -smax(-a, -b) >= -c implies min(a, b) >= -c: inside both operands' sets.

@@ -9,6 +9,7 @@ keeps the Lipschitz bound of the child for any invertible ``M``:
 
 from __future__ import annotations
 
+import drjit as dr
 import mitsuba as mi
 import numpy as np
 
@@ -85,6 +86,25 @@ class Transform(Node):
         f, ds = self.children[0].eval_bounds(self._local(p), tuple(c * inv_s for c in levels),
                                              footprint=footprint)
         return self._s * f, tuple(self._s * d for d in ds)
+
+    def box_range(self, lo, hi):
+        # The box in the child's coordinates: the bounding box of its eight mapped corners.
+        corners = [self._local(mi.Point3f(x, y, z)) for x in (lo.x, hi.x) for y in (lo.y, hi.y)
+                   for z in (lo.z, hi.z)]
+        clo = mi.Point3f(*(dr.minimum(dr.minimum(dr.minimum(corners[0][i], corners[1][i]),
+                                                 dr.minimum(corners[2][i], corners[3][i])),
+                                      dr.minimum(dr.minimum(corners[4][i], corners[5][i]),
+                                                 dr.minimum(corners[6][i], corners[7][i]))) for i in range(3)))
+        chi = mi.Point3f(*(dr.maximum(dr.maximum(dr.maximum(corners[0][i], corners[1][i]),
+                                                 dr.maximum(corners[2][i], corners[3][i])),
+                                      dr.maximum(dr.maximum(corners[4][i], corners[5][i]),
+                                                 dr.maximum(corners[6][i], corners[7][i]))) for i in range(3)))
+        a, b = self.children[0].box_range(clo, chi)
+        return self._s * a, self._s * b
+
+    def lod_error(self, radius):
+        # Values are scaled by s; the child sees the footprint shrunk by sigma_max.
+        return self.s_np * self.children[0].lod_error(radius / self.sigma_max)
 
     def bounds(self):
         box = finite_box(self.children[0])

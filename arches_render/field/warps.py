@@ -94,6 +94,10 @@ class FbmParams:
         its full field, a :class:`DomainWarp` within ``sqrt(3) L_child`` times it."""
         return self._lod.error(self._lod.level(footprint))
 
+    def own_lod_error(self, radius):
+        """Bound of ``|a fbm_fp - a fbm|`` (one fBm field) for footprints up to ``radius``."""
+        return self._lod.error_within(radius)
+
     @property
     def cost(self) -> float:
         # One octave of gradient noise costs about six capsules.
@@ -131,6 +135,9 @@ class Noise(FbmParams, Node):
 
     def bounds(self):
         return np.full(3, -np.inf), np.full(3, np.inf)
+
+    def lod_error(self, radius):
+        return self.own_lod_error(radius)
 
     @property
     def lipschitz(self):
@@ -176,6 +183,13 @@ class Displace(FbmParams, Node):
         lo, hi = self.children[0].bounds()
         return lo - self.max_offset, hi + self.max_offset
 
+    def lod_error(self, radius):
+        return self.children[0].lod_error(radius) + self.own_lod_error(radius)
+
+    def box_range(self, lo, hi):
+        a, b = self.children[0].box_range(lo, hi)
+        return a - self.max_offset, b + self.max_offset
+
     @property
     def lipschitz(self):
         return self.children[0].lipschitz + self.fbm_slope
@@ -214,6 +228,16 @@ class DomainWarp(FbmParams, Node):
         lo, hi = self.children[0].bounds()
         r = self.max_offset * math.sqrt(3.0)
         return lo - r, hi + r
+
+    def box_range(self, lo, hi):
+        # The child is read at points at most sqrt(3) max_offset away.
+        r = self.max_offset * math.sqrt(3.0)
+        return self.children[0].box_range(lo - r, hi + r)
+
+    def lod_error(self, radius):
+        # The warped point moves by at most sqrt(3) times one field's error.
+        child = self.children[0]
+        return child.lod_error(radius) + math.sqrt(3.0) * child.lipschitz * self.own_lod_error(radius)
 
     @property
     def lipschitz(self):

@@ -41,7 +41,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..field.heightfield_mipmap import heightfield_cast_plan
-from .march import SECOND_PASS_FACTOR, March, TraceResult, ray_box, relaxed_step
+from .march import SECOND_PASS_FACTOR, March, TraceResult, ray_box
 from .mipmap_traversal import MipmapTraversal
 from .sphere_tracer import SphereTracer
 
@@ -50,9 +50,10 @@ from .sphere_tracer import SphereTracer
 MAX_ROUNDS = 4096
 
 
-def make_tracer(field, eps=2e-4, omega=1.6, max_steps=512, cast=True):
+def make_tracer(field, eps=2e-4, omega=1.6, max_steps=512, cast=True, cells=False):
     """The fastest exact tracer for ``field``: a :class:`HeightfieldCaster` when the
-    tree reduces to a heightfield cast, else a :class:`SphereTracer`.
+    tree reduces to a heightfield cast, else a :class:`~.cell_tracer.CellTracer` (with
+    ``cells``) or a :class:`SphereTracer`.
 
     Parameters
     ----------
@@ -68,6 +69,9 @@ def make_tracer(field, eps=2e-4, omega=1.6, max_steps=512, cast=True):
     HeightfieldCaster or SphereTracer
     """
     plan = heightfield_cast_plan(field) if cast else None
+    if plan is None and cells:
+        from .cell_tracer import CellTracer
+        return CellTracer(field, eps=eps, omega=omega, max_steps=max_steps)
     if plan is None:
         return SphereTracer(field, eps=eps, omega=omega, max_steps=max_steps)
     return HeightfieldCaster(field, plan, eps=eps, omega=omega, max_steps=max_steps)
@@ -316,8 +320,7 @@ class HeightfieldCaster:
         steps = mi.UInt32(steps)
         while dr.hint(alive & (steps < budget), label="hf_near"):
             t_now = march.t
-            f, (r,) = self.field.eval_bounds(o + d * t_now, (0.0,), d, self.sphere.footprint(cone, t_now))
-            march, out = relaxed_step(march, f, r, t_end, self.sphere.tolerance(t_now, cone), self.omega)
+            march, out, r = self.sphere.step(o, d, march, t_end, cone)
             going = alive & ~out.failed & ~out.hit & ~out.invalid & (r >= self._min_cast) & (t_now >= near_end)
             # Leave at the end of the verified free interval, not at a relaxed point.
             march.t = dr.select(going, t_now + r, march.t)

@@ -93,7 +93,8 @@ class _ImplicitPathImpl:
     heightfield trees, :mod:`arches_render.render.heightfield_caster`; false:
     sphere-trace every field, for comparisons), ``lod`` (true: footprint level of
     detail, see the module docstring), ``lod_bounce_spread`` (0.1 rad: the cone
-    spread a non-delta bounce adds).
+    spread a non-delta bounce adds), ``surface_cells`` (false: trace fields that no
+    heightfield cast answers through surface cells, :mod:`.cell_tracer`).
     """
 
     def __init__(self, props):
@@ -110,6 +111,7 @@ class _ImplicitPathImpl:
         self.heightfield_cast = bool(props.get("heightfield_cast", True))
         self.lod = bool(props.get("lod", True))
         self.lod_bounce_spread = float(props.get("lod_bounce_spread", 0.1))
+        self.surface_cells = bool(props.get("surface_cells", False))
         self.tracer = None
         self.field_bsdf = None
         self.atmosphere = None
@@ -119,7 +121,7 @@ class _ImplicitPathImpl:
         """Give the integrator the field to trace and the BSDF that shades it (heightfield
         trees are ray-cast, others sphere-traced: :func:`make_tracer`)."""
         self.tracer = make_tracer(field, eps=self.eps, omega=self.omega, max_steps=self.max_steps,
-                                  cast=self.heightfield_cast)
+                                  cast=self.heightfield_cast, cells=self.surface_cells)
         self.field_bsdf = bsdf
 
     def attach_atmosphere(self, atmosphere):

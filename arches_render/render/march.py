@@ -41,8 +41,8 @@ from dataclasses import dataclass, field
 import drjit as dr
 import mitsuba as mi
 
-__all__ = ["SECOND_PASS_FACTOR", "March", "StepOutcome", "TraceResult", "position_ulps", "ray_box",
-           "relaxed_step"]
+__all__ = ["SECOND_PASS_FACTOR", "March", "StepOutcome", "TraceResult", "march_result", "position_ulps",
+           "ray_box", "relaxed_step"]
 
 #: A ray that exhausts ``max_steps`` goes on for this many times more steps.
 SECOND_PASS_FACTOR = 16
@@ -85,6 +85,16 @@ class TraceResult:
         return cls(hit=(mi.Bool(hit) | unresolved) & active, t=t, steps=mi.UInt32(steps),
                    exhausted=active & (steps > max_steps) | unresolved, unresolved=unresolved,
                    cells=mi.UInt32(0) if cells is None else mi.UInt32(cells))
+
+
+def march_result(march, hit, alive, invalid, steps, active, max_steps, cells=None):
+    """The :class:`TraceResult` of a sphere march that ended with ``alive`` lanes still
+    going (their budget ran out) and ``invalid`` ones stopped by a NaN: both are
+    unresolved, reported at their verified frontier, never at a relaxed point that
+    may lie past a thin wall."""
+    unresolved = alive | invalid
+    t = dr.select(unresolved, dr.minimum(march.t, march.frontier), march.t)
+    return TraceResult.of(hit, t, steps, unresolved, active, max_steps, cells=cells)
 
 
 def position_ulps(p, ulps):

@@ -3,7 +3,9 @@
 ``geometry = "field"`` renders with ``implicit_path`` and sphere-traces the field;
 ``geometry = "mesh"`` renders the marching-cubes mesh of the same field with
 Mitsuba's built-in ``path`` integrator and the same camera, lights and materials.
-This mesh mode is the cross-check of the sphere tracer. A scene with an
+This mesh mode is the cross-check of the sphere tracer. ``geometry = "sdfgrid"``
+(benchmarks only) renders the field sampled on the mesh's voxel grid as
+Mitsuba's own ``sdfgrid`` shape, the yardstick of ``render_field_vs_sdfgrid``. A scene with an
 ``[atmosphere]`` renders with ``implicit_path`` in both modes (Mitsuba's ``path``
 knows no fog), so the two are fogged by the same code.
 
@@ -135,6 +137,27 @@ def field_mesh_shape(desc, bsdf, voxel=None, progress=None):
     return mesh, tri
 
 
+def field_sdfgrid_shape(desc, bsdf, voxel=None):
+    """The field sampled on the mesh's voxel grid as Mitsuba's ``sdfgrid`` shape.
+
+    ``sdfgrid`` takes signed distances, negative inside, on a grid spanning the unit
+    cube, and renders only with a uniform scale (a non-cubic grid renders nothing in
+    ``llvm_ad_rgb``): the samples are padded with air into a cube of ``n`` samples a
+    side, negated and divided by the cube's edge ``(n - 1) voxel``. The field's
+    values are metres near its surface, which is what the shape's solver needs.
+    """
+    from ..mesh.polygonize import default_voxel, sample_grid
+    voxel = voxel or desc.render.voxel or default_voxel(desc.field)
+    vol, lo = sample_grid(desc.field, voxel)
+    n = int(max(vol.shape))
+    cube = np.full((n, n, n), -voxel, dtype=np.float32)
+    cube[:vol.shape[0], :vol.shape[1], :vol.shape[2]] = vol
+    edge = (n - 1) * voxel
+    grid = np.ascontiguousarray((-cube / edge).transpose(2, 1, 0)[..., None])  # (z, y, x, 1)
+    return {"type": "sdfgrid", "grid": mi.TensorXf(grid), "bsdf": bsdf,
+            "to_world": mi.ScalarTransform4f().translate(mi.ScalarPoint3f(*map(float, lo))).scale(float(edge))}
+
+
 def load_materials(desc) -> dict:
     """Mitsuba BSDF objects of the scene's materials, with their layer masks attached.
 
@@ -224,8 +247,8 @@ def build_scene(desc, geometry=None, width=None, height=None, voxel=None, progre
     Parameters
     ----------
     desc : SceneDescription
-    geometry : {'field', 'mesh'}, optional
-        Override of ``render.geometry``.
+    geometry : {'field', 'mesh', 'sdfgrid'}, optional
+        Override of ``render.geometry`` (``sdfgrid``: module docstring).
     width, height : int, optional
         Override of ``render.resolution``.
     voxel : float, optional
@@ -268,18 +291,21 @@ def build_scene(desc, geometry=None, width=None, height=None, voxel=None, progre
                 d[f"{item.name}_{k}"] = shape
     field_bsdf = bsdfs[desc.field_material] if desc.field is not None else None
     atmosphere = getattr(desc, "atmosphere", None)
-    if geometry == "mesh" or desc.field is None:
+    if geometry in ("mesh", "sdfgrid") or desc.field is None:
         ours = aovs or atmosphere is not None
         d["integrator"] = {"type": "implicit_path" if ours else "path", "max_depth": s.max_depth,
                            "rr_depth": s.rr_depth}
         if aovs:
             d["integrator"].update(aovs=True, moments=bool(moments))
-        if desc.field is not None:
+        if desc.field is not None and geometry == "sdfgrid":
+            d["field_sdf"] = field_sdfgrid_shape(desc, field_bsdf, voxel)
+        elif desc.field is not None:
             d["field_mesh"], _ = field_mesh_shape(desc, field_bsdf, voxel, progress)
         scene = mi.load_dict(d)
     else:
         d["integrator"] = {"type": "implicit_path", "max_depth": s.max_depth, "rr_depth": s.rr_depth,
                            "eps": s.eps, "omega": s.omega, "max_steps": s.max_steps,
+                           "surface_cells": s.surface_cells,
                            "aovs": bool(aovs), "moments": bool(moments)}
         scene = mi.load_dict(d)
         scene.integrator().attach(desc.field, field_bsdf)

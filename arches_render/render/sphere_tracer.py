@@ -33,7 +33,7 @@ from ..field import gradient
 from ..field.culling import with_culling
 from ..field.lod import Footprint
 from ..field.node import finite_box
-from .march import SECOND_PASS_FACTOR, March, TraceResult, position_ulps, ray_box, relaxed_step
+from .march import SECOND_PASS_FACTOR, March, march_result, position_ulps, ray_box, relaxed_step
 
 #: Fraction of the cone's radius that a hit may stay in front of the surface. At a
 #: camera ray's cone it is about ``eps t``: silhouettes are not dilated (a hit within
@@ -137,19 +137,23 @@ class SphereTracer:
         alive = mi.Bool(active)
         steps = mi.UInt32(0)
         # The budget ends the loop (its condition), not ``alive``: a lane still alive
-        # when it runs out is what TraceResult.of reports as unresolved.
+        # when it runs out is what march_result reports as unresolved.
         while dr.hint(alive & (steps < budget), label="sphere_trace"):
-            f, (r,) = self.field.eval_bounds(o + d * march.t, (0.0,), d, self.footprint(cone, march.t))
-            march, out = relaxed_step(march, f, r, t_end, self.tolerance(march.t, cone), self.omega)
+            march, out, _ = self.step(o, d, march, t_end, cone)
             hit |= out.hit
             invalid |= out.invalid
             alive &= ~(out.hit | out.done | out.invalid)
             steps += 1
-        unresolved = alive | invalid
-        # An unresolved ray stops at its verified frontier, never at a relaxed point
-        # that may lie past a thin wall.
-        t = dr.select(unresolved, dr.minimum(march.t, march.frontier), march.t)
-        return TraceResult.of(hit, t, steps, unresolved, active, self.max_steps)
+        return march_result(march, hit, alive, invalid, steps, active, self.max_steps)
+
+    def step(self, o, d, march, t_end, cone=None):
+        """One over-relaxed sphere step of the rays ``o + t d`` from ``march.t``
+        (:func:`~.march.relaxed_step`): ``(march, outcome, r)``, ``r`` the free radius
+        the field granted there."""
+        t = march.t
+        f, (r,) = self.field.eval_bounds(o + d * t, (0.0,), d, self.footprint(cone, t))
+        march, out = relaxed_step(march, f, r, t_end, self.tolerance(t, cone), self.omega)
+        return march, out, r
 
     def trace(self, o, d, tmax, active, cone=None):
         """``(hit, t)`` of :meth:`query` (unresolved rays count as hits)."""

@@ -10,7 +10,10 @@ A scene file is data, never code. Top-level tables:
                  near a pixel inflates every silhouette), ``omega``, ``max_steps``
                  (sphere-tracing steps of a ray's first pass, default 512; a ray
                  that uses them up gets a second pass of ``16 max_steps``, see
-                 :mod:`arches_render.render.sphere_tracer`)
+                 :mod:`arches_render.render.march`), ``surface_cells`` (trace
+                 through the surface cells of :mod:`arches_render.render.cell_tracer`:
+                 empty space jumped over, rock seen ahead by shadow rays; default
+                 false)
 ``[camera]``     ``origin``, ``target``, ``up`` (default +Z), ``fov`` (degrees, horizontal)
 ``[cameras.NAME]`` named cameras with the keys of ``[camera]`` (``SceneDescription.cameras``,
                  in file order after ``[camera]``, which is named ``"camera"``); a
@@ -99,6 +102,7 @@ class RenderSettings:
     eps: float = 2e-4
     omega: float = 1.6
     max_steps: int = 512
+    surface_cells: bool = False
 
 
 @dataclass
@@ -427,7 +431,8 @@ def parse_scene(data: dict, path) -> SceneDescription:
         exposure=r.number("exposure", 0.0, lo=-20, hi=20),
         eps=r.number("eps", 2e-4, lo=1e-7, hi=1e-2),
         omega=r.number("omega", 1.6, lo=1.0, hi=1.95),
-        max_steps=r.integer("max_steps", 512, lo=16, hi=1 << 16))
+        max_steps=r.integer("max_steps", 512, lo=16, hi=1 << 16),
+        surface_cells=r.boolean("surface_cells", False))
     if settings.max_depth == 0:
         raise r.error("max_depth", "must be -1 (unbounded) or an integer in [1, 1024] (got 0)")
     r.finish()

@@ -157,6 +157,10 @@ class Offset(Node):
     def eval(self, p):
         return self.children[0].eval(p) + self.delta
 
+    def box_range(self, lo, hi):
+        a, b = self.children[0].box_range(lo, hi)
+        return a + self.delta, b + self.delta
+
     def eval_bounds(self, p, levels, direction=None, footprint=None):
         # {f + delta >= -c} = {f >= -c - delta}
         f, ds = self.children[0].eval_bounds(p, tuple(c + self.delta_np for c in levels), direction, footprint)

@@ -31,7 +31,7 @@ import drjit as dr
 from arches_render.field.node import Node, hart_bounds
 
 from .geology import ResistanceNode
-from .operators import local_hart, local_lipschitz
+from arches_render.field.local_slopes import local_hart, local_lipschitz
 
 
 class Erosion(Node):
@@ -74,6 +74,12 @@ class Erosion(Node):
 
     def eval(self, p):
         return self._erode(p, self.children[0].eval(p))
+
+    def box_range(self, lo, hi):
+        # Erosion removes at most max(f_D, 0) (1 - rho) <= max(f_D, 0), never adds.
+        a, b = self.children[0].box_range(lo, hi)
+        _, d_hi = self.children[1].box_range(lo, hi)
+        return a - dr.maximum(d_hi, 0.0), b
 
     def local_lipschitz(self, p):
         """``(L, M, r)``: slope bound ``L`` in the ball of radius ``r`` around ``p`` (the

@@ -93,7 +93,7 @@ from arches_render.backend import variant
 from arches_render.field import Heightfield
 from arches_render.field.heightfield import height_grid
 from arches_render.field.lod import OctaveLOD
-from arches_render.field.node import box_distance, opaque_float
+from arches_render.field.node import box_distance, box_gap, box_reach, opaque_float
 from arches_render.field.noise import fbm, fbm_lipschitz, fbm_range
 
 from .falloff import G_SLOPE, falloff_slope_max, g_dr, sigmoid_coefficients, sigmoid_dr, sigmoid_slope
@@ -309,6 +309,24 @@ class ImplicitHeightfield(Heightfield):
         # Only the fBm has levels: the footprint field's slope is at most the full
         # one times 1 + kappa s (arches_render.field.lod), L included.
         return self._lod.kappa if self.amp is not None else 0.0
+
+    def box_range(self, lo, hi):
+        """``min(f_T, f_P)`` over the boxes: ``h`` from the DEM's pyramids widened by the
+        elevation primitives' and the fBm's ranges, ``s`` increasing, ``f_P`` decreasing
+        in the distance to the prism (convex: largest at a corner)."""
+        h_min, h_max = self.height_range(lo.x, hi.x, lo.y, hi.y)
+        t_lo = sigmoid_dr(h_min + self.extra_lo - hi.z, self._R, self._a, self._b)
+        t_hi = sigmoid_dr(h_max + self.extra_hi - lo.z, self._R, self._a, self._b)
+        d_min, d_max = box_gap(lo, hi, self._plo, self._phi), box_reach(lo, hi, self._plo, self._phi)
+        prism = lambda d: self._T * (2.0 * g_dr(dr.square(d * self._inv_R)) - 1.0)  # noqa: E731
+        return dr.minimum(t_lo, prism(d_max)), dr.minimum(t_hi, prism(d_min))
+
+    def lod_error(self, radius):
+        # The truncated fBm moves h by at most its error (the fade w <= 1), and the
+        # sigmoid moves f_T by at most its slope times that; f_P has no octaves.
+        if self.amp is None:
+            return 0.0
+        return sigmoid_slope(self.R_np, self.T_np) * self._lod.error_within(radius)
 
     @property
     def lipschitz(self):

@@ -66,6 +66,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from arches_render.field.local_slopes import eval_local, local_hart, local_lipschitz
 from arches_render.field.node import Node, box_union
 from arches_render.field.warps import FbmParams
 
@@ -87,50 +88,6 @@ def value_min(node: Node):
     return None if v is None else float(v)
 
 
-def local_lipschitz(node: Node, p):
-    """``(L, r)``: a slope bound of ``node`` valid in the ball of radius ``r`` around ``p``
-    (``r = None``: everywhere). Nodes that know better define ``local_lipschitz``."""
-    own = getattr(node, "local_lipschitz", None)
-    local = None if own is None else own(p)
-    if local is None:
-        return node.lipschitz, None
-    L, _, r = local
-    return L, r
-
-
-def eval_local(node: Node, p, levels, direction=None, footprint=None, radii=()):
-    """``(f, ds, slopes)``: ``node.eval_bounds`` and, for each radius of ``radii``, a
-    bound of the slope of ``node``'s (footprint) field in the ball of that radius
-    around ``p``. Nodes that know local slopes define ``eval_local`` (one pass for
-    value, bounds and slopes); for the others the slope is their
-    :func:`local_lipschitz` where its ball holds the radius, else their global one."""
-    own = getattr(node, "eval_local", None)
-    if own is not None:
-        return own(p, levels, direction, footprint, radii)
-    f, ds = node.eval_bounds(p, levels, direction, footprint)
-    if not radii:
-        return f, ds, ()
-    L, r = local_lipschitz(node, p)
-    L_glob = node.lipschitz
-    if footprint is not None and node.lod_kappa:
-        grow = 1.0 + node.lod_kappa * footprint.rate
-        L, L_glob = L * grow, L_glob * grow
-    slopes = tuple(L if r is None else dr.select(r >= rad, L, L_glob) for rad in radii)
-    return f, ds, slopes
-
-
-def local_hart(f, levels, L, r, L_global):
-    """Distance bounds ``max(min(r, (-f - c)/L), (-f - c)/L_global)`` for each level."""
-    out = []
-    for c in levels:
-        gap = dr.maximum(-f - c, 0.0)
-        d = gap * (1.0 / L_global)
-        if r is not None:
-            d = dr.maximum(d, dr.minimum(gap * dr.rcp(dr.maximum(L, 1e-12)), r))
-        out.append(d)
-    return tuple(out)
-
-
 class Sum(Node):
     """The paper's blend ``f = sum_i f_i`` (see module docstring)."""
 
@@ -147,6 +104,13 @@ class Sum(Node):
         for c in self.children[1:]:
             v = v + c.eval(p)
         return v
+
+    def box_range(self, lo, hi):
+        a, b = self.children[0].box_range(lo, hi)
+        for c in self.children[1:]:
+            ca, cb = c.box_range(lo, hi)
+            a, b = a + ca, b + cb
+        return a, b
 
     def eval_bounds(self, p, levels, direction=None, footprint=None):
         return self.eval_local(p, levels, direction, footprint)[:2]

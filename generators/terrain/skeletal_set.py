@@ -81,7 +81,7 @@ import mitsuba as mi
 import numpy as np
 
 from arches_render.field.lod import OctaveLOD
-from arches_render.field.node import Node, box_distance, opaque_float
+from arches_render.field.node import Node, box_distance, box_gap, opaque_float
 from arches_render.field.noise import fbm, fbm_lipschitz, fbm_range
 from arches_render.field.brick_grid import BrickLayout
 from arches_render.field.primitive_set import empty_distance, grid_lists
@@ -338,8 +338,46 @@ class SkeletalSet(Node):
         # Module docstring, "Footprint level of detail".
         return 2.0 * self._lod.kappa if self.noise else 0.0
 
+    def lod_error(self, radius):
+        """Bound of ``|F_fp - F|`` for footprints up to ``radius``: a truncated star noise
+        moves ``D`` by at most ``R A dn`` (``dn`` the unit noise's truncation error), so
+        ``d~ = rho / D`` by at most ``D_max R A dn / D_min^2`` inside the support, and each
+        primitive's value by ``|e| G_SLOPE A dn (1 + span) / (1 - span)^2``; a point sums
+        at most ``value_max - value_min`` of energy (``value_max`` for ``"max"``)."""
+        if not self.noise:
+            return 0.0
+        nz = self.noise
+        span = nz["span"]
+        per_energy = G_SLOPE * nz["amplitude"] * self._lod.error_within(radius) * (1.0 + span) / (1.0 - span) ** 2
+        energy = self.value_max if self.combine == "max" else self.value_max - self.value_min
+        return per_energy * energy
+
     # Zero (minus the threshold) outside the supports: no unit-rate falloff.
     unit_falloff = False
+
+    def box_range(self, lo, hi):
+        """Exactly ``-threshold`` over a box no support reaches (the 3x3x3 slope table of
+        the cell of its centre is 0, and the box lies within one cell edge of that
+        centre; or the box is off the grid), else the default."""
+        c = mi.Point3f((lo + hi) * 0.5)
+        reach = dr.norm(hi - lo) * 0.5
+        cell, stored, _, inside = self._cell(c)
+        quiet = inside & (dr.gather(mi.Float, self._cell_L, cell, stored) == 0.0) & (reach <= self.cell)
+        far = box_gap(lo, hi, self._glo_box[0], self._glo_box[1]) > 0.0
+        a, b = super().box_range(lo, hi)
+        zero = quiet | far
+        return dr.select(zero, -self._threshold, a), dr.select(zero, -self._threshold, b)
+
+    def local_lod_error(self, p, reach, radius):
+        """:meth:`lod_error` where some primitive's support may lie within ``reach`` of ``p``
+        (a cell's 3x3x3 slope table is 0 where none does), 0 elsewhere."""
+        full = self.lod_error(radius)
+        if not full:
+            return 0.0
+        cell, stored, _, inside = self._cell(p)
+        quiet = inside & (dr.gather(mi.Float, self._cell_L, cell, stored) == 0.0) & (reach <= self.cell)
+        far = ~inside & (box_distance(p, self._glo_box[0], self._glo_box[1]) > reach)
+        return dr.select(quiet | far, 0.0, full)
 
     def primitive_boxes(self):
         """Per-primitive support boxes ``(lo (N, 3), hi (N, 3))``: outside its box a
@@ -510,10 +548,10 @@ class SkeletalSet(Node):
         return self.eval_local(p, levels, direction, footprint)[:2]
 
     def eval_local(self, p, levels, direction=None, footprint=None, radii=()):
-        """``(f, ds, slopes)``: :meth:`eval_bounds` and, for each radius of ``radii``
-        (at most :attr:`local_radius`), a bound of ``|grad f|`` in the
-        ball of that radius around ``p`` (module docstring, "Local slopes"), from the
-        same loop over the primitives."""
+        """``(f, ds, slopes)``: :meth:`eval_bounds` and, for each radius of ``radii``, a
+        bound of ``|grad f|`` in the ball of that radius around ``p`` (module
+        docstring, "Local slopes"; up to :attr:`local_radius` from the same loop over
+        the primitives, up to a cell edge from the cell tables, beyond that global)."""
         # Local Hart bounds: min(r, (-f - c) / L) where the ball of radius r has slope
         # <= L (the cell tables, and each radius of radii). Levels below the threshold
         # ({F >= u}, u > 0) add the geometric bounds of .skeletal_bounds, and carving
@@ -541,9 +579,13 @@ class SkeletalSet(Node):
             L, L_glob = L * grow, L_glob * grow
         if radii:
             # Outside the grid no primitive is listed: 0 where the supports' box is
-            # out of reach, else the global bound.
+            # out of reach, else the global bound. The slope lists answer balls of up
+            # to local_radius; larger balls (a structure's cells) get the cell tables'
+            # bound up to one cell edge, the global one beyond.
             outside = box_distance(p, self._glo_box[0], self._glo_box[1])
-            slopes = [dr.select(inside, dr.minimum(s_, L_glob), dr.select(outside > rad, 0.0, L_glob))
+            slopes = [dr.select(inside, dr.select(rad <= self.local_radius, dr.minimum(s_, L_glob),
+                                                  dr.select(rad <= self.cell, L, L_glob)),
+                                dr.select(outside > rad, 0.0, L_glob))
                       for s_, rad in zip(slopes, radii)]
         inv, inv_glob = dr.rcp(dr.maximum(L, 1e-12)), 1.0 / L_glob
         ds = []

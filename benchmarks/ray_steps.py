@@ -1,0 +1,129 @@
+"""Field tracer steps per ray, by kind of ray, as the integrator casts them.
+
+:func:`ray_steps` traces one camera ray a pixel through a scene's field (pixel cone),
+then from each hit one shadow ray towards the scene's first sun (the integrator skips
+those below the surface: so does this) and one cosine-sampled bounce ray whose cone
+widens by the integrator's ``lod_bounce_spread``; each query reports its steps (field
+evaluations) and cells (cheap cell visits of a structure or a heightfield cast).
+Only the field is traced (no meshes), with the tracer the renderer would build.
+
+Used by ``trace_steps_by_ray_type`` (``bench_tracing.py``) and by hand::
+
+    python benchmarks/ray_steps.py scenes/gallery/fig23_goblins.toml
+"""
+
+from __future__ import annotations
+
+import sys
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+#: The integrator's default ``lod_bounce_spread`` (radians).
+BOUNCE_SPREAD = 0.1
+
+
+def _sun_direction(desc):
+    """Unit direction towards the scene's first sun (or a 35 degree default)."""
+    for light in desc.lights:
+        if "sun_direction" in light:
+            v = np.asarray(light["sun_direction"], float)
+            return v / np.linalg.norm(v)
+        if light.get("type") == "directional" and "direction" in light:
+            v = -np.asarray(light["direction"], float)
+            return v / np.linalg.norm(v)
+    v = np.array([0.5, -0.6, 0.7])
+    return v / np.linalg.norm(v)
+
+
+def _vector(v, like):
+    return mi.Vector3f(*(mi.Float(float(c)) + 0.0 * like for c in v))
+
+
+def _per_lane(values, n):
+    """A query's per-lane counts as a numpy array of ``n`` (a literal 0 has width 1)."""
+    if values is None:
+        return np.zeros(n)
+    return np.broadcast_to(values.numpy(), (n,))
+
+
+def _stats(res, lanes):
+    steps = _per_lane(res.steps, len(lanes))[lanes]
+    cells = _per_lane(getattr(res, "cells", None), len(lanes))[lanes]
+    if not len(steps):
+        return dict(n=0, mean=0.0, p99=0.0, cells_mean=0.0)
+    return dict(n=int(len(steps)), mean=float(steps.mean()), p99=float(np.percentile(steps, 99)),
+                cells_mean=float(np.mean(cells)))
+
+
+def ray_steps(desc, tracer, width=320, height=180, seed=1):
+    """Steps per ray of the camera, shadow and bounce rays of one view.
+
+    Parameters
+    ----------
+    desc : SceneDescription
+        The scene (its camera and lights).
+    tracer : SphereTracer, HeightfieldCaster or any tracer with ``query`` and ``surface``
+        The field's tracer, as the integrator builds it.
+    width, height : int
+        One camera ray a pixel.
+    seed : int
+        Of the bounce directions.
+
+    Returns
+    -------
+    dict
+        ``{kind: {n, mean, p99, cells_mean}}`` for ``camera``, ``shadow``, ``bounce``.
+    """
+    from bench_tracing import camera_rays
+    cam = desc.camera
+    o, d, rate = camera_rays(cam.origin, cam.target, cam.fov, width, height)
+    o = o + 0.0 * d
+    cone = (mi.Float(0.0) + 0.0 * d.x, mi.Float(rate) + 0.0 * d.x)
+    first = tracer.query(o, d, mi.Float(dr.inf), mi.Bool(True), cone)
+    dr.eval(first.hit, first.t, first.steps)
+    hit = first.hit.numpy()
+    out = {"camera": _stats(first, np.ones_like(hit))}
+    p, n = tracer.surface(o + d * first.t, first.t, d, cone)
+    # The integrator's lift off the surface.
+    from arches_render.render import integrator  # noqa: F401  (same variant, plugins)
+    lift = dr.maximum(0.1 * tracer.eps * first.t, 32 * 1.1920929e-7 * dr.max(dr.abs(p)) + 1e-6)
+    origin = p + n * lift
+    hit_cone = (cone[0] + cone[1] * first.t, cone[1])
+    sun = _vector(_sun_direction(desc), origin.x)
+    lit = first.hit & (dr.dot(n, sun) > 0.0) & (dr.dot(n, -d) > 0.0)
+    shadow = tracer.query(origin, sun, mi.Float(dr.inf), lit, hit_cone, any_hit=True)
+    dr.eval(shadow.steps)
+    out["shadow"] = _stats(shadow, lit.numpy())
+    rng = np.random.default_rng(seed)
+    u1, u2 = rng.random(len(hit)).astype(np.float32), rng.random(len(hit)).astype(np.float32)
+    local = mi.Vector3f(mi.Float(np.sqrt(u1) * np.cos(2 * np.pi * u2)),
+                        mi.Float(np.sqrt(u1) * np.sin(2 * np.pi * u2)), mi.Float(np.sqrt(1 - u1)))
+    bounce_dir = mi.Frame3f(n).to_world(local)
+    bounce = tracer.query(origin, bounce_dir, mi.Float(dr.inf), first.hit,
+                          (hit_cone[0], hit_cone[1] + BOUNCE_SPREAD))
+    dr.eval(bounce.steps)
+    out["bounce"] = _stats(bounce, hit)
+    return out
+
+
+def main(argv):
+    from arches_render import backend
+    backend.set_variant()
+    from arches_render.render.heightfield_caster import make_tracer
+    from arches_render.scene import load_scene
+    for path in argv:
+        desc = load_scene(path)
+        r = desc.render
+        tracer = make_tracer(desc.field, eps=r.eps, omega=r.omega, max_steps=r.max_steps)
+        stats = ray_steps(desc, tracer)
+        print(path, type(tracer).__name__)
+        for kind, s in stats.items():
+            print(f"  {kind:7s} n={s['n']:6d} mean={s['mean']:7.1f} p99={s['p99']:7.0f} cells={s['cells_mean']:6.1f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.path.insert(0, str(__import__("pathlib").Path(__file__).parent))
+    sys.exit(main(sys.argv[1:]))
