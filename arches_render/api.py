@@ -43,6 +43,7 @@ import numpy as np
 
 from .backend import set_variant
 from .imaging.colour import view_to_uint8
+from .imaging.exposure import exposure_of
 from .imaging.compare import Thresholds, compare as _compare
 from .imaging.exr import read_exr
 from .imaging.preview import write_png
@@ -336,4 +337,4 @@ class Lookdev:
         header = render_header(self.desc.name, self.path, seed, spp, self.width, self.height, "field",
                                (cam.origin, cam.target, cam.up, cam.fov))
         write_render(path, rgb, layers, header, clip=sensor_clip(self.scene))
-        write_png(path.with_suffix(".png"), view_to_uint8(rgb, view, self.desc.render.exposure))
+        write_png(path.with_suffix(".png"), view_to_uint8(rgb, view, exposure_of(self.desc.render, rgb)[0]))

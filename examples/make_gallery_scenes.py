@@ -69,10 +69,12 @@ def amplified(name, heights, cell, preset, seed=7, steps=None):
     return scene_document(result, name, GALLERY, close=0)[0], result
 
 
-def finish(doc, name, description, camera, sun, atmosphere=None, spp=32, max_depth=4, exposure=0.0):
-    """Gallery settings on a scene document: 1280x720, camera, sun, atmosphere."""
+def finish(doc, name, description, camera, sun, atmosphere=None, spp=32, max_depth=4):
+    """Gallery settings on a scene document: 1280x720, camera, sun, atmosphere; the
+    preview's exposure is metered (no ``exposure`` key), its view ACES, denoised."""
     doc["scene"] = {"name": name, "description": description}
-    doc["render"] = {"resolution": [1280, 720], "spp": spp, "max_depth": max_depth, "exposure": exposure}
+    doc["render"] = {"resolution": [1280, 720], "spp": spp, "max_depth": max_depth, "view": "aces",
+                     "denoise": True}
     doc["camera"] = camera
     doc["lights"] = [dict({"type": "sunsky", "turbidity": 3.0}, **sun)]
     if atmosphere is not None:
@@ -260,7 +262,7 @@ def every_generator():
                  {"origin": [-48.0, -42.0, 11.0], "target": [-4.0, 8.0, 9.0], "fov": 55.0},
                  {"elevation": 34.0, "azimuth": -65.0},
                  # 16 spp: at 640x360 this scene took ~14x the CPU of the canyon scene (compile included).
-                 {"haze": {"density": 0.001, "height": 20.0}}, spp=16, max_depth=3, exposure=0.5)
+                 {"haze": {"density": 0.001, "height": 20.0}}, spp=16, max_depth=3)
     # A flight for ``turntable --path``: from the sea to the cove floor, then up onto the plateau.
     # "orbit": the turntable's camera (turntable --camera orbit), high enough that the half turn
     # behind the cliff stays above the plateau (the main camera's orbit would pass through it).
@@ -373,7 +375,7 @@ def floating_islands():
                  "with eroded strata and craggy undersides, over a hazy valley",
                  {"origin": [-250.0, -200.0, 75.0], "target": [30.0, 60.0, 15.0], "fov": 55.0},
                  {"elevation": 30.0, "azimuth": -60.0},
-                 {"haze": {"density": 0.0012, "height": 120.0}}, spp=16, max_depth=3, exposure=0.5)
+                 {"haze": {"density": 0.0012, "height": 120.0}}, spp=16, max_depth=3)
     write(name, doc, "Gallery: Fig. 21 of Paris et al. 2019, floating islands (examples/make_gallery_scenes.py)")
 
 

@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 from ..imaging.colour import VIEWS, view_to_uint8
+from ..imaging.exposure import exposure_of
 from ..imaging.preview import write_png
 from ..render.denoise import denoise
 from ..render.distributed import dask_client, render_tiled
@@ -57,15 +58,16 @@ def run(args) -> int:
     writable_output(out, create=args.output is None)
     desc = load_scene(args.scene)
     cam = desc.select_camera(args.camera)
-    view = args.view or "srgb"
+    s = desc.render
+    view = args.view or s.view
     if view not in VIEWS:
         raise UsageError(f"--view must be one of {', '.join(VIEWS)} (got {view!r})")
-    s = desc.render
+    want_denoised = args.denoise or s.denoise
     spp = args.spp or s.spp
     seed = s.seed if args.seed is None else args.seed
     width, height = args.resolution or (s.width, s.height)
     geometry = args.geometry or s.geometry
-    aovs = args.aovs or args.denoise
+    aovs = args.aovs or want_denoised
     tiles = args.tiles or (0 if not (args.scheduler or args.workers) else 4)
     if tiles and geometry == "mesh":
         raise UsageError("--tiles/--workers/--scheduler render the field; drop --geometry mesh")
@@ -97,13 +99,16 @@ def run(args) -> int:
         clip = sensor_clip(scene)
     bar.close()
     denoised = None
-    if args.denoise:
+    if want_denoised:
         denoised = denoise(img, layers["albedo"][0], layers["normal"][0])
     elapsed = time.perf_counter() - t0
+    shown = img if denoised is None else denoised
+    exposure, metered = exposure_of(s, shown)
     header = render_header(desc.name, args.scene, seed, spp, width, height, geometry,
                            (cam.origin, cam.target, cam.up, cam.fov), tiles=tiles)
+    header.update(exposure=f"{exposure:.3f}", exposure_metered=str(metered).lower(), view=view)
     write_render(out, img, layers, header, denoised, clip=clip)
     png = out.with_suffix(".png")
-    write_png(png, view_to_uint8(img if denoised is None else denoised, view, s.exposure))
+    write_png(png, view_to_uint8(shown, view, exposure))
     print(f"wrote {out} and {png} ({width}x{height}, {spp} spp, {geometry}, {elapsed:.1f} s)")
     return 0

@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 from ..imaging.colour import VIEWS, view_to_uint8
+from ..imaging.exposure import exposure_of
 from ..imaging.exr import read_exr
 from ..imaging.video import write_mp4
 from ..render.camera_path import path_cameras
@@ -57,10 +58,10 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    view = args.view or "srgb"
+    desc = load_scene(args.scene)
+    view = args.view or desc.render.view
     if view not in VIEWS:
         raise UsageError(f"--view must be one of {', '.join(VIEWS)} (got {view!r})")
-    desc = load_scene(args.scene)
     cameras = None
     if args.path:
         if args.camera:
@@ -77,19 +78,20 @@ def run(args) -> int:
     s = desc.render
     width, height = args.resolution or (s.width, s.height)
     spp = args.spp or s.spp
-    check_render_memory(desc, width, height, args.aovs or args.denoise, "field")
+    denoise = args.denoise or s.denoise
+    check_render_memory(desc, width, height, args.aovs or denoise, "field")
     writable_output(out, folder=True)  # last check: it creates the folder
     plan = plan_turntable(desc, args.scene, out, frames, spp, width, height, args.seed,
-                          args.passes or s.passes, aovs=args.aovs, denoise=args.denoise, cameras=cameras)
+                          args.passes or s.passes, aovs=args.aovs, denoise=denoise, cameras=cameras)
     skipped = frames - len(plan.todo)
     t0 = time.perf_counter()
     bar = Progress(f"turntable {desc.name}", "frame", args.quiet)
     if args.workers or args.scheduler:
         with dask_client(args.scheduler, args.workers) as client:
-            render_turntable(plan, args.denoise, client, progress=bar)
+            render_turntable(plan, denoise, client, progress=bar)
     else:
         samples = Progress("  samples", "spp", args.quiet)
-        render_turntable(plan, args.denoise, progress=bar, sample_progress=samples)
+        render_turntable(plan, denoise, progress=bar, sample_progress=samples)
         samples.close()
     bar.close()
     elapsed = time.perf_counter() - t0
@@ -97,7 +99,9 @@ def run(args) -> int:
            + (f"; {skipped} complete frames skipped" if skipped else ""))
     if args.mp4:
         mp4 = out / f"{desc.name}.mp4"
-        write_mp4(mp4, (view_to_uint8(read_exr(p).rgb, view, s.exposure) for p in plan.paths), fps=args.fps)
+        # One exposure for the whole clip (metered on its first frame): no flicker.
+        exposure, _ = exposure_of(s, read_exr(plan.paths[0]).rgb)
+        write_mp4(mp4, (view_to_uint8(read_exr(p).rgb, view, exposure) for p in plan.paths), fps=args.fps)
         msg += f"; {mp4}"
     print(msg)
     return 0

@@ -5,7 +5,11 @@ A scene file is data, never code. Top-level tables:
 ``[scene]``      ``name``, ``description``
 ``[render]``     ``resolution = [w, h]``, ``spp``, ``passes``, ``seed``, ``max_depth``,
                  ``rr_depth``, ``geometry = "field" | "mesh"``, ``voxel`` (mesh mode,
-                 metres), ``exposure`` (preview stops), ``eps`` (relative hit
+                 metres), ``exposure`` (preview stops; absent: metered from the
+                 render, :mod:`arches_render.imaging.exposure`), ``view`` (the
+                 preview's view transform, ``srgb`` default or ``aces``...),
+                 ``denoise`` (add the OIDN-denoised layer, which the preview
+                 shows; default false), ``eps`` (relative hit
                  tolerance, default 2e-4: well below a pixel, since a tolerance
                  near a pixel inflates every silhouette), ``omega``, ``max_steps``
                  (sphere-tracing steps of a ray's first pass, default 512; a ray
@@ -72,6 +76,7 @@ import mitsuba as mi
 
 from .. import extensions, tomlfile
 from ..field.node import finite_box
+from ..imaging.colour import VIEWS
 from ..materials import presets
 from .errors import SceneError
 from .material_keys import parse_look, parse_masks
@@ -98,7 +103,9 @@ class RenderSettings:
     rr_depth: int = 5
     geometry: str = "field"
     voxel: float = 0.0         # 0: choose from the field's bounds
-    exposure: float = 0.0
+    exposure: float | None = None   # None: metered
+    view: str = "srgb"
+    denoise: bool = False
     eps: float = 2e-4
     omega: float = 1.6
     max_steps: int = 512
@@ -428,7 +435,9 @@ def parse_scene(data: dict, path) -> SceneDescription:
         rr_depth=r.integer("rr_depth", 5, lo=1, hi=1024),
         geometry=r.string("geometry", "field", choices=set(GEOMETRY_MODES)),
         voxel=r.number("voxel", 0.0, lo=0.0),
-        exposure=r.number("exposure", 0.0, lo=-20, hi=20),
+        exposure=r.number("exposure", None, lo=-20, hi=20),
+        view=r.string("view", "srgb", choices=set(VIEWS)),
+        denoise=r.boolean("denoise", False),
         eps=r.number("eps", 2e-4, lo=1e-7, hi=1e-2),
         omega=r.number("omega", 1.6, lo=1.0, hi=1.95),
         max_steps=r.integer("max_steps", 512, lo=16, hi=1 << 16),
