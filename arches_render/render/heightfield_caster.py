@@ -64,6 +64,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..field.heightfield_mipmap import MaxMipmap, heightfield_cast_plan
+from ..field.node import cell_index
 from .sphere_tracer import SECOND_PASS_FACTOR, SphereTracer, TraceResult, ray_box
 
 
@@ -236,8 +237,8 @@ class HeightfieldCaster:
             p = o + d * t
             low = t > t_in
             # Clamp before converting: far points must not overflow the integers.
-            ci = Int(dr.clip(dr.floor((p.x - self._x0) * self._inv_dx), 0.0, self.ncx - 1.0))
-            cj = Int(dr.clip(dr.floor((p.y - self._y0) * self._inv_dy), 0.0, self.ncy - 1.0))
+            ci = cell_index((p.x - self._x0) * self._inv_dx, self.ncx, Int)
+            cj = cell_index((p.y - self._y0) * self._inv_dy, self.ncy, Int)
             return dr.select(low, 0, Int(top)), dr.select(low, ci, 0), dr.select(low, cj, 0)
 
         if not self.hybrid:
