@@ -24,9 +24,39 @@ import drjit as dr  # noqa: E402
 import mitsuba as mi  # noqa: E402
 
 from arches_render.field.node import cell_index, clip_index  # noqa: E402
+from arches_render.mesh.polygonize import field_normals, polygonize  # noqa: E402
 from arches_render.scene import load_scene  # noqa: E402
 
 EVERY = REPO / "scenes" / "gallery" / "every_generator.toml"
+
+# A box wall under columnar blocks whose clamp (margin 5 cm) is thin against the 0.5 m
+# voxel: the field is flat at -0.05 m where marching cubes puts the vertices of the
+# wall's bottom and top faces (measured: about 190 of 2,900 vertices).
+FLAT_BLOCKS = """
+[camera]
+origin = [8.0, -5.0, -6.0]
+target = [-2.0, 0.0, 0.0]
+[[lights]]
+type = "constant"
+[materials.rock]
+type = "triplanar"
+preset = "basalt"
+cavity = true
+[field]
+root = "cliff"
+material = "rock"
+[nodes.cliff]
+type = "blocks"
+host = { type = "box", center = [-4.0, 0.0, 4.0], size = [8.0, 14.0, 8.0] }
+margin = 0.05
+structure = "columnar"
+tile_size = 10.0
+spacing = 1.1
+region = [-2.5, -7.0, 0.0, 2.5, 7.0, 8.5]
+min_slope = 60.0
+seed = 4
+"""
+
 
 def _odd_points():
     """NaN, infinities, huge and ordinary coordinates, mixed per axis."""
@@ -62,3 +92,25 @@ def test_every_node_of_the_combined_scene_reads_inside_its_arrays_at_any_point(c
         dr.set_flag(dr.JitFlag.Debug, False)
     err = capfd.readouterr().err
     assert "out-of-bounds" not in err, err[:2000]
+
+
+def test_marching_cubes_normals_are_unit_where_the_field_is_flat(tmp_path):
+    scene = tmp_path / "flat.toml"
+    scene.write_text(FLAT_BLOCKS)
+    desc = load_scene(scene)
+    mesh = polygonize(desc.field, 0.5)
+    v, f, n = mesh.vertices.astype(np.float64), mesh.faces.astype(np.int64), mesh.normals.astype(np.float64)
+    raw = field_normals(desc.field, v, 0.25 * 0.5)
+    flat = np.linalg.norm(raw, axis=1) < 0.5
+    assert flat.sum() >= 50, flat.sum()  # the case this test is about
+    assert np.isfinite(n).all()
+    np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1.0, atol=1e-5)
+    # Elsewhere the field's own normals are kept.
+    np.testing.assert_array_equal(n[~flat], raw[~flat])
+    # A flat vertex's normal faces the way its faces do (the mesh is wound outwards, by
+    # the field's normals); marching cubes leaves a few faces of zero area, which face no way.
+    geo = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    proper = np.linalg.norm(geo, axis=1) > 0
+    for k in range(3):
+        on = proper & flat[f[:, k]]
+        assert on.sum() > 50 and (np.einsum("ij,ij->i", geo[on], n[f[on, k]]) > 0).all()
