@@ -70,12 +70,23 @@ class RenderProcess:
     The child starts on the first job (or :meth:`start`) and lives until :meth:`close`,
     its parent's death, or a crash (the next job starts another). Thread-safe: jobs
     from several threads take turns.
+
+    Parameters
+    ----------
+    stderr : file or None, optional
+        Where the child's standard error goes (default: this process's).
+    jit_debug : bool, optional
+        Run the child with Dr.Jit's ``Debug`` flag: every gather and scatter checks
+        its index and reports one outside its array on the child's standard error
+        (``out-of-bounds``), where it would otherwise read or write anywhere.
     """
 
-    def __init__(self):
+    def __init__(self, stderr=None, jit_debug: bool = False):
         self._lock = threading.Lock()
         self._proc = None
         self._conn = None
+        self._stderr = stderr
+        self._jit_debug = bool(jit_debug)
 
     @property
     def pid(self):
@@ -87,8 +98,15 @@ class RenderProcess:
         with self._lock:
             self._ask(("ping",), "start")
 
-    def run(self, job):
+    def run(self, job, timeout: float | None = None):
         """Render ``job`` in the child.
+
+        Parameters
+        ----------
+        job : RenderJob
+        timeout : float, optional
+            Seconds to wait for the answer; past them the child is killed (a hang is
+            an error too). Default: no limit.
 
         Returns
         -------
@@ -98,12 +116,12 @@ class RenderProcess:
         Raises
         ------
         RenderCrash
-            When the child dies before it answers.
+            When the child dies (or times out) before it answers.
         Exception
             What :func:`~arches_render.render.jobs.run_job` raised in the child.
         """
         with self._lock:
-            return self._ask(("job", job), job.describe())
+            return self._ask(("job", job), job.describe(), timeout)
 
     def thread_count(self):
         """Dr.Jit's thread count in the child, ``None`` while no child runs."""
@@ -119,20 +137,25 @@ class RenderProcess:
     def _spawn(self) -> None:
         import socket
         ours, theirs = socket.socketpair()
+        argv = [sys.executable, "-m", __name__, str(theirs.fileno())] + (["--jit-debug"] if self._jit_debug else [])
         try:
-            self._proc = subprocess.Popen([sys.executable, "-m", __name__, str(theirs.fileno())],
-                                          pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL)
+            self._proc = subprocess.Popen(argv, pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL,
+                                          stderr=self._stderr)
         finally:
             theirs.close()
         self._conn = Connection(ours.detach())
 
-    def _ask(self, request, what: str):
+    def _ask(self, request, what: str, timeout: float | None = None):
         if self._proc is None or self._proc.poll() is not None:
             self._stop()
             self._spawn()
         try:
             self._conn.send(request)
-            status, value = self._receive()
+            status, value = self._receive(timeout)
+        except TimeoutError:
+            self._proc.kill()
+            self._stop()
+            raise RenderCrash(f"{what}: the render process gave no answer in {timeout:g} s (killed)") from None
         except (EOFError, OSError):
             code = self._proc.wait()
             self._stop()
@@ -141,12 +164,15 @@ class RenderProcess:
             raise value
         return value
 
-    def _receive(self):
+    def _receive(self, timeout):
         # Poll rather than block: should the child leave its socket open in a process of
         # its own, its death must still be seen (never a hang).
+        deadline = None if timeout is None else time.monotonic() + timeout
         while not self._conn.poll(0.5):
             if self._proc.poll() is not None and not self._conn.poll(0):
                 raise EOFError
+            if deadline is not None and time.monotonic() > deadline:
+                raise TimeoutError
         return self._conn.recv()
 
     def _stop(self) -> None:
@@ -213,12 +239,16 @@ def _portable(exc: Exception) -> Exception:
 
 
 def main(argv=None) -> int:
-    """The child's loop: answer requests on the socket given as ``argv[0]`` until it closes."""
+    """The child's loop: answer requests on the socket given as ``argv[0]`` until it closes
+    (``--jit-debug``: Dr.Jit's ``Debug`` flag on, see :class:`RenderProcess`)."""
     argv = sys.argv[1:] if argv is None else argv
     conn = Connection(int(argv[0]))
     threading.Thread(target=_leave_with_parent, args=(os.getppid(),), daemon=True).start()
     from ..backend import set_variant
     set_variant()
+    if "--jit-debug" in argv:
+        import drjit as dr
+        dr.set_flag(dr.JitFlag.Debug, True)
     while True:
         try:
             request = conn.recv()
