@@ -140,13 +140,24 @@ class Node:
 
 def clip_index(x, lo, hi):
     """``x`` clipped to ``[lo, hi]`` with a NaN taken as ``lo``: a float that converts to an
-    integer index inside the range (``mi.Float``).
+    integer index inside the range.
 
     ``dr.clip`` keeps a NaN, and LLVM converts a NaN (or a float beyond the integer
     range) to an arbitrary integer: a gather indexed by it reads anywhere, and a
     mesh whose shading normal was NaN sent such points into a field lookup and
     crashed the renderer with a segmentation fault (issue 38). A NaN point gets a
     meaningless value this way, but from inside the arrays.
+
+    Parameters
+    ----------
+    x : mi.Float
+        Positions in cell units (any float, NaN and infinities included).
+    lo, hi : float
+        The range.
+
+    Returns
+    -------
+    mi.Float
     """
     return dr.clip(dr.select(dr.isnan(x), lo, x), lo, hi)
 

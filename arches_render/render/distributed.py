@@ -55,6 +55,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import warnings
 from pathlib import Path
 from typing import Iterator, Sequence
 
@@ -99,8 +100,13 @@ def dask_client(scheduler: str | None = None, workers: int | None = None) -> Ite
     # and the jobs cancelled after it as warnings: the client reports the error in one
     # line (map_jobs), so the cluster stays quiet below CRITICAL.
     logging.getLogger("distributed").setLevel(logging.CRITICAL)
-    with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                      silence_logs=logging.CRITICAL) as cluster, Client(cluster) as client:
+    with warnings.catch_warnings():
+        # Without a dashboard the scheduler still serves HTTP, on port 8787 when free;
+        # with another cluster on this machine it warns that it took another port.
+        warnings.filterwarnings("ignore", message=r"Port \d+ is already in use", category=UserWarning)
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                               silence_logs=logging.CRITICAL)
+    with cluster, Client(cluster) as client:
         yield client
 
 
@@ -201,7 +207,19 @@ def tile_grid(width: int, height: int, tiles: int) -> list[tuple[int, int, int, 
 
 
 def tile_label(i: int, n: int, crop) -> str:
-    """``'tile I of N (x X0-X1, y Y0-Y1)'``: tile ``i`` (from 0) in messages, pixels inclusive."""
+    """``'tile I of N (x X0-X1, y Y0-Y1)'``: tile ``i`` (from 0) in messages, pixels inclusive.
+
+    Parameters
+    ----------
+    i, n : int
+        The tile's index and the number of tiles.
+    crop : (int, int, int, int)
+        The tile's window ``(x0, y0, w, h)``.
+
+    Returns
+    -------
+    str
+    """
     x0, y0, w, h = crop
     return f"tile {i} of {n} (x {x0}-{x0 + w - 1}, y {y0}-{y0 + h - 1})"
 

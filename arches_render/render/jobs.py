@@ -33,10 +33,10 @@ __all__ = ["RenderJob", "run_job", "clear_cache", "scene_inputs", "sensor_clip",
 
 _CACHE: "OrderedDict[tuple, tuple]" = OrderedDict()
 _CACHE_SIZE = 4
-# One job at a time per process: a Dask worker with several threads (``dask worker``
-# defaults to one per core) would otherwise render two frames at once through the
-# same cached scene, one moving the other's camera; Dr.Jit's own threads already use
-# the cores.
+# One job at a time per process: two threads (a caller's, or a Dask worker's several,
+# though workers now hand their jobs to one render process, render/isolated.py) would
+# otherwise render two frames at once through the same cached scene, one moving the
+# other's camera; Dr.Jit's own threads already use the cores.
 _RUN_LOCK = threading.Lock()
 
 

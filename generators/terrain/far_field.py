@@ -193,7 +193,19 @@ def far_field_mesh(node, reach=None):
 
 
 def ring_distances(first: float, reach: float) -> list:
-    """Distances of the rings from the border: ``0, first``, then ``x 1.35`` each, and ``reach``."""
+    """Distances of the rings from the border: ``0, first``, then ``x 1.35`` each, and ``reach``.
+
+    Parameters
+    ----------
+    first : float
+        The first ring's distance (metres, > 0).
+    reach : float
+        The last ring's distance (metres).
+
+    Returns
+    -------
+    list of float
+    """
     s = [0.0, float(first)]
     while s[-1] * _GROWTH < reach:
         s.append(s[-1] * _GROWTH)
@@ -211,6 +223,21 @@ def sea_ring_mesh(extent, level, reach, first=None):
     the ``position`` AOV 9 km away at 40 m from the camera, and shadow rays leaving
     from there), while a triangle about as long as its distance from the tile keeps
     them within float32 precision of the ray's own ``o + t d``.
+
+    Parameters
+    ----------
+    extent : sequence of 4 floats
+        The tile ``(x0, y0, x1, y1)``.
+    level : float
+        The sea level (z).
+    reach : float
+        Distance of the outer edge from the tile (metres).
+    first : float, optional
+        Distance of the first ring.
+
+    Returns
+    -------
+    trimesh.Trimesh
     """
     x0, y0, x1, y1 = extent
     first = max(x1 - x0, y1 - y0) / 64.0 if first is None else float(first)
