@@ -229,10 +229,12 @@ def _answer(conn: Connection, request) -> None:
 
 
 def _portable(exc: Exception) -> Exception:
-    """``exc`` if it survives a pickle round trip (an exception whose ``__init__`` takes other
-    arguments than its ``args`` does not), else a ``RuntimeError`` with its text."""
+    """``exc`` if the parent can rebuild it from its pickle (an exception whose ``__init__``
+    takes other arguments than its ``args`` cannot), else a ``RuntimeError`` with its text."""
     try:
-        pickle.loads(pickle.dumps(exc))
+        pickle.dumps(exc)
+        rebuild, args = exc.__reduce__()[:2]
+        rebuild(*args)  # what unpickling it in the parent calls
         return exc
     except Exception:
         return RuntimeError(f"{type(exc).__name__}: {exc}")
