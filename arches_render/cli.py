@@ -5,8 +5,10 @@ module with ``register(subparsers)``: the core ones in :mod:`arches_render.comma
 a generator's in its package, listed by the registry (:mod:`arches_render.extensions`).
 Bad input (scene files, arguments, requests that do not fit in memory) exits with
 status 2 and one line naming the file, key and allowed range; an output that cannot
-be written (read-only folder, full disk) exits with status 1 and one line naming
-it. No traceback reaches the user for an error of theirs or of their machine.
+be written (read-only folder, full disk), or a Dask worker's render process that dies
+(a native crash: the line names the scene, the frame or tile and the signal), exits
+with status 1 and one line. No traceback reaches the user for an error of theirs or
+of their machine.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from . import __version__, extensions
 from .backend import BackendError, set_variant
 from .atomic import OutputError
 from .commands import UsageError, info, mesh, render, turntable
+from .render.isolated import RenderCrash
 from .resources import ResourceError
 from .scene import SceneError, paths
 
@@ -53,7 +56,9 @@ def main(argv=None) -> int:
         msg = str(exc) if isinstance(exc, OutputError) or not exc.filename else f"{exc.filename}: {exc.strerror}"
         print(f"arches-render: error: {msg}", file=sys.stderr)
         return EXIT_FAILURE
-    except BackendError as exc:
+    except (BackendError, RenderCrash) as exc:
+        # RenderCrash: a render process of a Dask worker died (a native crash); the
+        # message names the scene, the frame or tile, and the signal.
         print(f"arches-render: error: {exc}", file=sys.stderr)
         return EXIT_FAILURE
     except KeyboardInterrupt:

@@ -37,7 +37,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .node import opaque_float
+from .node import cell_index, opaque_float
 
 __all__ = ["BrickGrid", "BrickLayout", "BRICK", "DENSE_EDT_CELLS", "MAX_BRICKS"]
 
@@ -128,9 +128,7 @@ class BrickLayout:
         rx, ry, rz = (int(v) for v in self.res)
         bx, by = int(self.bricks[0]), int(self.bricks[1])
         fx, fy, fz = self.cell_coordinates(p)
-        ix = mi.UInt32(dr.clip(fx, 0.0, rx - 1.0))
-        iy = mi.UInt32(dr.clip(fy, 0.0, ry - 1.0))
-        iz = mi.UInt32(dr.clip(fz, 0.0, rz - 1.0))
+        ix, iy, iz = cell_index(fx, rx), cell_index(fy, ry), cell_index(fz, rz)
         brick = ((iz >> 3) * by + (iy >> 3)) * bx + (ix >> 3)
         slot = dr.gather(mi.UInt32, self._slots, brick)
         stored = slot != int(NO_SLOT)

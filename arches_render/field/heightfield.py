@@ -42,7 +42,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .node import Node, opaque_float
+from .node import Node, cell_index, clip_index, opaque_float
 
 
 #: Largest height or extent coordinate (m), ten times Earth's radius: beyond it a value
@@ -130,8 +130,8 @@ class Heightfield(Node):
         """The bilinear cell under ``(x, y)`` (``mi.Float`` each, clamped at the edges):
         its corner samples ``h00, h10, h01, h11`` and the local coordinates ``fu, fv``
         in ``[0, 1]``."""
-        u = dr.clip((x - self._x0) * self._inv_dx, 0.0, self.nx - 1.0)
-        v = dr.clip((y - self._y0) * self._inv_dy, 0.0, self.ny - 1.0)
+        u = clip_index((x - self._x0) * self._inv_dx, 0.0, self.nx - 1.0)
+        v = clip_index((y - self._y0) * self._inv_dy, 0.0, self.ny - 1.0)
         i = dr.minimum(mi.UInt32(u), self.nx - 2)
         j = dr.minimum(mi.UInt32(v), self.ny - 2)
         fu, fv = u - mi.Float(i), v - mi.Float(j)
@@ -160,8 +160,8 @@ class Heightfield(Node):
         # An intersection of the ground and the box: as far as the farther one.
         box = self._box(p)
         top = self.height(p.x, p.y) - p.z
-        u = dr.clip((p.x - self._x0) * self._inv_dx, 0.0, self.nx - 1.0)
-        v = dr.clip((p.y - self._y0) * self._inv_dy, 0.0, self.ny - 1.0)
+        u = clip_index((p.x - self._x0) * self._inv_dx, 0.0, self.nx - 1.0)
+        v = clip_index((p.y - self._y0) * self._inv_dy, 0.0, self.ny - 1.0)
         k = dr.minimum(mi.UInt32(v), self.ny - 2) * self.nx + dr.minimum(mi.UInt32(u), self.nx - 2)
         above = [p.z - dr.gather(mi.Float, maxima, k) for maxima in self._maxima]
         if direction is not None:
@@ -193,7 +193,7 @@ class Heightfield(Node):
         ncx, ncy = self.nx - 1, self.ny - 1
 
         def cell(v, v0, inv, n):
-            return mi.Int32(dr.clip(dr.floor((v - v0) * inv), 0.0, n - 1.0))
+            return cell_index((v - v0) * inv, n, mi.Int32)
 
         i0, i1 = cell(xlo, self._x0, self._inv_dx, ncx), cell(xhi, self._x0, self._inv_dx, ncx)
         j0, j1 = cell(ylo, self._y0, self._inv_dy, ncy), cell(yhi, self._y0, self._inv_dy, ncy)

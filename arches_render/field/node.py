@@ -186,6 +186,50 @@ class Node:
         return f"{type(self).__name__}({', '.join(repr(c) for c in self.children)})"
 
 
+def clip_index(x, lo, hi):
+    """``x`` clipped to ``[lo, hi]`` with a NaN taken as ``lo``: a float that converts to an
+    integer index inside the range.
+
+    ``dr.clip`` keeps a NaN, and LLVM converts a NaN (or a float beyond the integer
+    range) to an arbitrary integer: a gather indexed by it reads anywhere, and a
+    mesh whose shading normal was NaN sent such points into a field lookup and
+    crashed the renderer with a segmentation fault (issue 38). A NaN point gets a
+    meaningless value this way, but from inside the arrays.
+
+    Parameters
+    ----------
+    x : mi.Float
+        Positions in cell units (any float, NaN and infinities included).
+    lo, hi : float
+        The range.
+
+    Returns
+    -------
+    mi.Float
+    """
+    return dr.clip(dr.select(dr.isnan(x), lo, x), lo, hi)
+
+
+def cell_index(x, n: int, kind=None):
+    """Index of the cell ``floor(x)`` of ``n`` cells along an axis, clamped to ``[0, n - 1]``,
+    for any float ``x`` (NaN and infinities included: :func:`clip_index`).
+
+    Parameters
+    ----------
+    x : mi.Float
+        Position in cell units from the grid's first cell.
+    n : int
+        Cells along the axis.
+    kind : type, optional
+        The integer array type (default ``mi.UInt32``).
+
+    Returns
+    -------
+    mi.UInt32 or ``kind``
+    """
+    return (kind or mi.UInt32)(clip_index(x, 0.0, n - 1.0))
+
+
 def hart_bounds(f, levels, lipschitz):
     """Hart's bounds ``max(-f - c, 0) / L`` for each level ``c``."""
     inv = 1.0 / lipschitz

@@ -64,7 +64,7 @@ import numpy as np
 from ..backend import variant
 from .brick_grid import BRICK, NO_SLOT, BrickLayout
 from .local_slopes import eval_local
-from .node import opaque_float
+from .node import cell_index, opaque_float
 
 __all__ = ["SurfaceCells", "FOOTPRINT_CLASSES", "LEVEL_LADDER"]
 
@@ -272,7 +272,7 @@ class SurfaceCells:
         rx, ry, rz = (int(v) for v in self.res)
         f = [(p[i] - self._lo[i]) * dr.rcp(self._leaf) for i in range(3)]
         inside = (f[0] >= 0.0) & (f[1] >= 0.0) & (f[2] >= 0.0) & (f[0] < rx) & (f[1] < ry) & (f[2] < rz)
-        ix, iy, iz = (mi.UInt32(dr.clip(v, 0.0, n - 1.0)) for v, n in zip(f, (rx, ry, rz)))
+        ix, iy, iz = (cell_index(v, n) for v, n in zip(f, (rx, ry, rz)))
         bx, by = int(self.layout.bricks[0]), int(self.layout.bricks[1])
         brick = ((iz >> 3) * by + (iy >> 3)) * bx + (ix >> 3)
         slot = dr.gather(mi.UInt32, self._slots, brick, inside)

@@ -111,8 +111,8 @@ def bake_material(mesh: UVMesh, bsdf, field=None) -> BakedTextures:
         A ``triplanar`` BSDF (its ``albedo``), or any BSDF with
         ``eval_diffuse_reflectance``.
     field : Node, optional
-        The field the mesh was polygonized from: normals from its gradient
-        (default: interpolated vertex normals).
+        The field the mesh was polygonized from: normals from its gradient where
+        it has one (default, and where the field is flat: interpolated vertex normals).
 
     Returns
     -------
@@ -130,10 +130,12 @@ def bake_material(mesh: UVMesh, bsdf, field=None) -> BakedTextures:
     lam = bary[covered]
     faces = mesh.faces.astype(np.int64)[idx]
     p = np.einsum("nk,nkd->nd", lam, mesh.vertices.astype(np.float64)[faces])
+    n = np.einsum("nk,nkd->nd", lam, mesh.normals.astype(np.float64)[faces])
     if field is not None:
-        n = field_normals(field, p, 0.05 * default_voxel(field)).astype(np.float64)
-    else:
-        n = np.einsum("nk,nkd->nd", lam, mesh.normals.astype(np.float64)[faces])
+        # The field's normal where it has one; where it lies flat (a clamped field next
+        # to its surface, issue 38) the mesh's normal.
+        g = field_normals(field, p, 0.05 * default_voxel(field)).astype(np.float64)
+        n = np.where(np.linalg.norm(g, axis=1, keepdims=True) > 0.5, g, n)
     n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-20)
 
     si = dr.zeros(mi.SurfaceInteraction3f, len(p))

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..field import Node, evaluate
-from .polygonize import BLOCK, PolygonizeError, TriangleMesh, classify_blocks, default_voxel, field_normals
+from .polygonize import BLOCK, PolygonizeError, TriangleMesh, classify_blocks, default_voxel, oriented_mesh
 
 __all__ = ["Chunk", "polygonize_chunks", "chunk_ranges"]
 
@@ -113,12 +113,7 @@ def polygonize_chunks(node: Node, voxel: float | None = None, chunk_cells: int =
                 continue
             v, f, _, _ = marching_cubes(vol, level=0.0, spacing=(1.0, 1.0, 1.0))
             verts = (origin + (v.astype(np.float64) + start) * voxel).astype(np.float32)
-            normals = field_normals(node, verts.astype(np.float64), 0.25 * voxel)
-            f = f.astype(np.int64)
-            a, b, c = (verts[f[:, i]].astype(np.float64) for i in range(3))
-            if np.einsum("ij,ij->", np.cross(b - a, c - a), normals[f].sum(axis=1)) < 0:
-                f = f[:, ::-1]
-            chunks.append(Chunk((ix, iy), TriangleMesh(verts, f.astype(np.uint32), normals)))
+            chunks.append(Chunk((ix, iy), oriented_mesh(node, verts, f, voxel)))
     if not chunks:
         raise PolygonizeError(f"the field has no surface inside its bounds at voxel {voxel:g} m")
     return chunks

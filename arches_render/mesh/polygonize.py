@@ -9,7 +9,12 @@ voxel; such a block is filled with a constant of the right sign, and since no
 surface lies within a voxel of it, every cube edge that the surface crosses joins
 two exactly sampled voxels. The mesh is therefore the dense mesh of the grid. Vertex normals
 come from the field gradient (``-grad f``, outward), and the mesh is wound so that
-its faces look the same way: Mitsuba's ``diffuse`` is one-sided.
+its faces look the same way: Mitsuba's ``diffuse`` is one-sided. Where the field is
+flat at a vertex (no gradient: a clamped field such as the ``blocks`` node's margin
+lies flat next to a surface that rises within one voxel, and marching cubes puts
+the vertex on the flat side), the vertex takes the area-weighted normal of its faces
+instead (:func:`oriented_mesh`): a zero normal made Mitsuba's interpolated shading
+normal NaN on every face whose three vertices had one (issue 38).
 
 References
 ----------
@@ -158,16 +163,72 @@ def polygonize(node: Node, voxel: float | None = None, progress=None) -> Triangl
     if not (vol.max() > 0 > vol.min()):
         raise PolygonizeError(f"the field has no surface inside its bounds at voxel {voxel:g} m")
     verts, faces, _, _ = marching_cubes(vol, level=0.0, spacing=(voxel,) * 3)
-    verts = (verts + origin).astype(np.float32)
+    return oriented_mesh(node, (verts + origin).astype(np.float32), faces, voxel)
+
+
+def oriented_mesh(node: Node, verts: np.ndarray, faces: np.ndarray, voxel: float) -> TriangleMesh:
+    """A marching-cubes mesh of ``node`` with its vertex normals and one outward winding.
+
+    Parameters
+    ----------
+    node : Node
+        The field the mesh was extracted from.
+    verts : numpy.ndarray
+        ``(N, 3)`` float32 vertices (world space).
+    faces : numpy.ndarray
+        ``(M, 3)`` vertex indices, consistently wound (scikit-image's output).
+    voxel : float
+        The grid's voxel edge (the gradient's step is a quarter of it).
+
+    Returns
+    -------
+    TriangleMesh
+        Normals ``-grad f / |grad f|``, or where the field is flat at a vertex the
+        area-weighted normal of its faces; faces wound to agree with the normals.
+    """
     normals = field_normals(node, verts.astype(np.float64), 0.25 * voxel)
-    faces = faces.astype(np.int64)
+    faces = np.asarray(faces, np.int64)
     # scikit-image winds all faces consistently; orient the whole mesh once by
     # the field normals (a per-face vote would flip slivers at random).
     a, b, c = (verts[faces[:, i]].astype(np.float64) for i in range(3))
     geo = np.cross(b - a, c - a)
     if np.einsum("ij,ij->", geo, normals[faces].sum(axis=1)) < 0:
-        faces = faces[:, ::-1]
-    return TriangleMesh(verts, faces.astype(np.uint32), normals)
+        faces, geo = faces[:, ::-1], -geo
+    return TriangleMesh(verts, faces.astype(np.uint32), fill_flat_normals(normals, faces, geo))
+
+
+def fill_flat_normals(normals: np.ndarray, faces: np.ndarray, face_normals: np.ndarray) -> np.ndarray:
+    """Unit vertex normals, those that are not (zero or NaN: the field is flat there)
+    replaced by the sum of their faces' area-weighted normals.
+
+    Parameters
+    ----------
+    normals : numpy.ndarray
+        ``(N, 3)`` vertex normals, unit or zero.
+    faces : numpy.ndarray
+        ``(M, 3)`` vertex indices.
+    face_normals : numpy.ndarray
+        ``(M, 3)`` ``(b - a) x (c - a)`` of each face, wound as the mesh.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(N, 3)`` float32 unit normals (+z for a vertex whose faces' normals cancel).
+    """
+    flat = ~(np.linalg.norm(normals, axis=1) > 0.5)  # a NaN fails the test too
+    if not flat.any():
+        return normals
+    out = np.array(normals, np.float32)
+    acc = np.zeros((len(normals), 3), np.float64)
+    for k in range(3):
+        np.add.at(acc, faces[:, k], face_normals)
+    acc = acc[flat]
+    length = np.linalg.norm(acc, axis=1)
+    # Faces that cancel, or are all degenerate: any unit normal beats a NaN shading frame.
+    none = ~(length > 0)
+    acc[none], length[none] = (0.0, 0.0, 1.0), 1.0
+    out[flat] = acc / length[:, None]
+    return out
 
 
 def export_mesh(mesh: TriangleMesh, path) -> None:

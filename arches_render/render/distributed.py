@@ -2,9 +2,12 @@
 
 Work is a list of :class:`~arches_render.render.jobs.RenderJob` (picklable: a scene
 *path* and numbers). Workers run :func:`~arches_render.render.jobs.run_job`, the
-function a serial run calls, and send back the pixels; the client writes every
-file, so a remote cluster needs the scene files (same path) but no shared output
-folder. Determinism comes from the jobs: a frame or a tile has its own sample
+function a serial run calls, in a render process of their own
+(:mod:`arches_render.render.isolated`: a native crash there is a one-line
+:class:`~arches_render.render.isolated.RenderCrash` naming scene, frame or tile and
+signal, not a worker lost and the job retried), and send back the pixels; the client
+writes every file, so a remote cluster needs the scene files (same path) but no
+shared output folder. Determinism comes from the jobs: a frame or a tile has its own sample
 stream (:func:`arches_render.render.renderer.pass_seed`), and the box filter
 makes a render bitwise reproducible, so the gathered files hold the same bits as
 a serial run.
@@ -52,17 +55,19 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import warnings
 from pathlib import Path
 from typing import Iterator, Sequence
 
 import numpy as np
 
 from ..imaging.golden import update_golden
+from .isolated import RenderCrash, render_process, run_isolated
 from .jobs import RenderJob, run_job
 from .renderer import moments_of
 
-__all__ = ["dask_client", "map_jobs", "tile_grid", "render_tiled", "regenerate_goldens", "drjit_threads",
-           "warm_workers"]
+__all__ = ["dask_client", "map_jobs", "tile_grid", "tile_label", "render_tiled", "regenerate_goldens",
+           "drjit_threads", "warm_workers"]
 
 
 @contextlib.contextmanager
@@ -90,10 +95,18 @@ def dask_client(scheduler: str | None = None, workers: int | None = None) -> Ite
             client.close()
         return
     n = int(workers or os.cpu_count() or 1)
-    # The default logging reports every worker start and stop on stderr.
-    logging.getLogger("distributed").setLevel(logging.WARNING)
-    with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                      silence_logs=logging.WARNING) as cluster, Client(cluster) as client:
+    # The default logging reports every worker start and stop on stderr; a failed job's
+    # error (a render process's crash included) is logged by its worker as a traceback,
+    # and the jobs cancelled after it as warnings: the client reports the error in one
+    # line (map_jobs), so the cluster stays quiet below CRITICAL.
+    logging.getLogger("distributed").setLevel(logging.CRITICAL)
+    with warnings.catch_warnings():
+        # Without a dashboard the scheduler still serves HTTP, on port 8787 when free;
+        # with another cluster on this machine it warns that it took another port.
+        warnings.filterwarnings("ignore", message=r"Port \d+ is already in use", category=UserWarning)
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                               silence_logs=logging.CRITICAL)
+    with cluster, Client(cluster) as client:
         yield client
 
 
@@ -116,28 +129,26 @@ def _threads_per_worker(client) -> int:
 
 
 def _drjit_thread_count():
-    import sys
-    # None where no job ran yet: importing Dr.Jit here would report its default.
-    dr = sys.modules.get("drjit")
-    return int(dr.thread_count()) if dr is not None else None
+    # None where no job ran yet: the render process starts with the first job.
+    return render_process().thread_count()
 
 
 def drjit_threads(client) -> dict:
-    """Dr.Jit threads of every worker process: ``{worker address: threads or None}``.
+    """Dr.Jit threads of every worker's render process: ``{worker address: threads or None}``.
 
-    ``None`` for a worker that has not imported Dr.Jit (it ran no job yet).
+    ``None`` for a worker whose render process has not started (it ran no job yet).
     """
     return client.run(_drjit_thread_count)
 
 
-def _import_renderer():
-    from ..backend import set_variant
-    set_variant()
+def _start_renderer():
+    render_process().start()
 
 
 def warm_workers(client) -> None:
-    """Import Mitsuba and choose its variant in every worker (seconds a worker, once)."""
-    client.run(_import_renderer)
+    """Start every worker's render process, which imports Mitsuba and chooses its variant
+    (seconds a worker, once)."""
+    client.run(_start_renderer)
 
 
 def map_jobs(client, jobs: Sequence[RenderJob], keys: Sequence | None = None):
@@ -153,15 +164,32 @@ def map_jobs(client, jobs: Sequence[RenderJob], keys: Sequence | None = None):
     Yields
     ------
     (key, (numpy.ndarray, dict))
+
+    Raises
+    ------
+    RenderCrash
+        When a job's render process died (a native crash in the worker: no retry), or
+        Dask gave up on a job whose workers kept dying; the other jobs are cancelled.
     """
-    from dask.distributed import as_completed  # on use: dask is slow to import
+    from dask.distributed import KilledWorker, as_completed  # on use: dask is slow to import
     keys = list(range(len(jobs))) if keys is None else list(keys)
     threads = _threads_per_worker(client)
     jobs = [j if j.threads else j.with_(threads=threads) for j in jobs]
-    futures = client.map(run_job, jobs, pure=False)
+    futures = client.map(run_isolated, jobs, pure=False)
     index = {f.key: i for i, f in enumerate(futures)}
-    for fut, result in as_completed(futures, with_results=True):
-        yield keys[index[fut.key]], result
+    try:
+        for fut, result in as_completed(futures, with_results=True):
+            yield keys[index[fut.key]], result
+    except KilledWorker as exc:
+        # Workers killed from outside (SIGKILL, out of memory) while running the job, as
+        # often as the scheduler allows: one line, not Dask's paragraph. Their nannies
+        # log the signal; the scheduler does not pass it on.
+        what = jobs[index[exc.task]].describe() if exc.task in index else str(exc.task)
+        n = exc.allowed_failures + 1
+        raise RenderCrash(f"{what}: the Dask worker running it died, {n} time{'s' if n > 1 else ''} (the last "
+                          f"was {getattr(exc.last_worker, 'address', '?')}; its log names the signal)") from None
+    finally:
+        client.cancel([f for f in futures if not f.done()])
 
 
 def tile_grid(width: int, height: int, tiles: int) -> list[tuple[int, int, int, int]]:
@@ -176,6 +204,24 @@ def tile_grid(width: int, height: int, tiles: int) -> list[tuple[int, int, int, 
     ys = np.linspace(0, height, ny + 1).round().astype(int)
     return [(int(xs[i]), int(ys[j]), int(xs[i + 1] - xs[i]), int(ys[j + 1] - ys[j]))
             for j in range(ny) for i in range(nx)]
+
+
+def tile_label(i: int, n: int, crop) -> str:
+    """``'tile I of N (x X0-X1, y Y0-Y1)'``: tile ``i`` (from 0) in messages, pixels inclusive.
+
+    Parameters
+    ----------
+    i, n : int
+        The tile's index and the number of tiles.
+    crop : (int, int, int, int)
+        The tile's window ``(x0, y0, w, h)``.
+
+    Returns
+    -------
+    str
+    """
+    x0, y0, w, h = crop
+    return f"tile {i} of {n} (x {x0}-{x0 + w - 1}, y {y0}-{y0 + h - 1})"
 
 
 def render_tiled(job: RenderJob, tiles: int, client=None, progress=None):
@@ -200,7 +246,7 @@ def render_tiled(job: RenderJob, tiles: int, client=None, progress=None):
         Beauty and layers of the whole image.
     """
     grid = tile_grid(job.width, job.height, tiles)
-    jobs = [job.with_(crop=c, stream=i) for i, c in enumerate(grid)]
+    jobs = [job.with_(crop=c, stream=i, label=tile_label(i, len(grid), c)) for i, c in enumerate(grid)]
     rgb = np.zeros((job.height, job.width, 3), np.float32)
     layers: dict = {}
 
@@ -247,8 +293,8 @@ def regenerate_goldens(scenes: Sequence, golden_dir, width: int, height: int, re
     -------
     list of Golden
     """
-    jobs = [RenderJob(scene=str(Path(p).resolve()), width=width, height=height, spp=ref_spp, moments=True)
-            for p in scenes]
+    jobs = [RenderJob(scene=str(Path(p).resolve()), width=width, height=height, spp=ref_spp, moments=True,
+                      label="golden reference") for p in scenes]
     keys = [Path(p).stem for p in scenes]
     results = ({k: run_job(j) for k, j in zip(keys, jobs)} if client is None
                else dict(map_jobs(client, jobs, keys)))

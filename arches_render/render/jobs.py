@@ -24,7 +24,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .. import tomlfile
+from .. import faults, tomlfile
 from ..backend import set_variant
 from ..scene import load_scene, paths
 from .renderer import build_scene, render_layers, set_pixel_spread, tile_projection
@@ -33,10 +33,10 @@ __all__ = ["RenderJob", "run_job", "clear_cache", "scene_inputs", "sensor_clip",
 
 _CACHE: "OrderedDict[tuple, tuple]" = OrderedDict()
 _CACHE_SIZE = 4
-# One job at a time per process: a Dask worker with several threads (``dask worker``
-# defaults to one per core) would otherwise render two frames at once through the
-# same cached scene, one moving the other's camera; Dr.Jit's own threads already use
-# the cores.
+# One job at a time per process: two threads (a caller's, or a Dask worker's several,
+# though workers now hand their jobs to one render process, render/isolated.py) would
+# otherwise render two frames at once through the same cached scene, one moving the
+# other's camera; Dr.Jit's own threads already use the cores.
 _RUN_LOCK = threading.Lock()
 
 
@@ -72,6 +72,9 @@ class RenderJob:
     allow : tuple of str
         Folders the scene may read files from besides its own
         (:mod:`arches_render.scene.paths`); default those allowed where the job is made.
+    label : str
+        What the job renders, for messages (``'frame 1003'``, ``'tile 2 of 4 ...'``;
+        ``''``: the image); no part of the pixels.
     """
 
     scene: str
@@ -89,10 +92,15 @@ class RenderJob:
     voxel: float = 0.0
     threads: int = 0
     allow: tuple = dc_field(default_factory=paths.extra_folders)
+    label: str = ""
 
     def with_(self, **changes) -> "RenderJob":
         """A copy with some fields changed."""
         return replace(self, **changes)
+
+    def describe(self) -> str:
+        """``SCENE: WHAT (GEOMETRY[, AOVs])``, the job in one line for messages."""
+        return f"{self.scene}: {self.label or 'image'} ({self.geometry}{', AOVs' if self.aovs else ''})"
 
 
 def clear_cache() -> None:
@@ -244,6 +252,7 @@ def run_job(job: RenderJob, progress=None):
         (see :func:`arches_render.render.renderer.render_layers`).
     """
     set_variant()
+    faults.point("render.job")  # test-only kill point (arches_render.faults)
     with _RUN_LOCK:
         if job.threads:
             dr.set_thread_count(int(job.threads))

@@ -47,6 +47,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..field.heightfield_mipmap import MaxMipmap
+from ..field.node import cell_index
 
 
 @dataclass
@@ -123,9 +124,9 @@ class MipmapTraversal:
         leave the surface), else the top cell (a descent finds the first cells of a
         ray entering from outside fastest)."""
         p = o + d * t
-        # Clamp before converting: far points must not overflow the integers.
-        ci = mi.Int32(dr.clip(dr.floor((p.x - self._x0) * self._inv_dx), 0.0, self.ncx - 1.0))
-        cj = mi.Int32(dr.clip(dr.floor((p.y - self._y0) * self._inv_dy), 0.0, self.ncy - 1.0))
+        # Clamp before converting: far (or NaN) points must not overflow the integers.
+        ci = cell_index((p.x - self._x0) * self._inv_dx, self.ncx, mi.Int32)
+        cj = cell_index((p.y - self._y0) * self._inv_dy, self.ncy, mi.Int32)
         return dr.select(fine, 0, mi.Int32(self.top)), dr.select(fine, ci, 0), dr.select(fine, cj, 0)
 
     @dr.syntax

@@ -138,7 +138,7 @@ def plan_turntable(desc, scene_file, out_dir, frames: int, spp: int, width: int,
             camera = (tuple(origin.tolist()), tuple(cam.target), tuple(cam.up), cam.fov)
         job = RenderJob(scene=str(Path(scene_file).resolve()), width=width, height=height, spp=spp,
                         seed=seed, passes=passes, stream=k, geometry="field", aovs=aovs or denoise,
-                        camera=camera, threads=threads)
+                        camera=camera, threads=threads, label=f"frame {FIRST_FRAME + k}")
         header = render_header(desc.name, scene_file, seed, spp, width, height, "field", camera,
                                stream=k, frame=FIRST_FRAME + k, frames=frames)
         path = frame_path(out_dir, desc.name, k)

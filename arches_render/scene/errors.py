@@ -12,3 +12,8 @@ class SceneError(ValueError):
         self.message = message
         where = f"{self.file}: {key}" if key else self.file
         super().__init__(f"{where}: {message}")
+
+    def __reduce__(self):
+        # Pickled with its own arguments, not the formatted line: a render process or a
+        # Dask worker sends it back to the CLI, which prints it as raised.
+        return type(self), (self.file, self.key, self.message)

@@ -82,7 +82,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from arches_render.field.node import Node, box_distance, opaque_float
+from arches_render.field.node import Node, box_distance, cell_index, opaque_float
 from arches_render.field.noise import corner_hash, fade, fbm_lipschitz, fbm_range, grad_dot
 from arches_render.field.operators import smooth_max
 
@@ -304,9 +304,9 @@ class BlockField(Node):
 
     def _world_cell(self, p):
         rx, ry, rz = (int(v) for v in self.world_res)
-        ix = mi.UInt32(dr.clip((p.x - self._wlo[0]) * self._winv, 0.0, rx - 1.0))
-        iy = mi.UInt32(dr.clip((p.y - self._wlo[1]) * self._winv, 0.0, ry - 1.0))
-        iz = mi.UInt32(dr.clip((p.z - self._wlo[2]) * self._winv, 0.0, rz - 1.0))
+        ix = cell_index((p.x - self._wlo[0]) * self._winv, rx)
+        iy = cell_index((p.y - self._wlo[1]) * self._winv, ry)
+        iz = cell_index((p.z - self._wlo[2]) * self._winv, rz)
         return (ix * ry + iy) * rz + iz
 
     # -- evaluation ------------------------------------------------------------------
@@ -351,7 +351,7 @@ class BlockField(Node):
         T = dr.floor(p * self._inv_s)
         q = p - T * self._s
         res = self.res_t
-        ci = [mi.UInt32(dr.clip(q[a] * self._inv_cell, 0.0, res - 1.0)) for a in range(3)]
+        ci = [cell_index(q[a] * self._inv_cell, res) for a in range(3)]
         cell = (ci[0] * res + ci[1]) * res + ci[2]
         start = dr.gather(mi.UInt32, self._start, cell)
         count = dr.gather(mi.UInt32, self._count, cell)

@@ -61,7 +61,7 @@ import numpy as np
 from numba import njit
 
 from arches_render.backend import variant
-from arches_render.field.node import Node, box_distance, hart_bounds, opaque_float
+from arches_render.field.node import Node, box_distance, cell_index, clip_index, hart_bounds, opaque_float
 
 from .material_stacks import SOLID, MaterialStacks
 
@@ -173,8 +173,10 @@ class _Footprint:
     """Columns under the kernel cube and their overlap lengths (in cells)."""
 
     def __init__(self, node, p):
-        u = (p.x - node._x0) * node._inv_s
-        v = (p.y - node._y0) * node._inv_s
+        # Points beyond the grid by more than the kernel keep no column either way; the
+        # clip keeps far and NaN points' column indices inside the integers (clip_index).
+        u = clip_index((p.x - node._x0) * node._inv_s, -node.K - 1.0, node.nx + node.K + 1.0)
+        v = clip_index((p.y - node._y0) * node._inv_s, -node.K - 1.0, node.ny + node.K + 1.0)
         r = node._r
         i0 = mi.Int32(dr.floor(u - r))
         j0 = mi.Int32(dr.floor(v - r))
@@ -440,7 +442,7 @@ class _CoarseDistance:
         idx, rel = [], []
         for a, n in enumerate(self.res):
             q = (p[a] - self._g0[a]) * self._inv_c
-            i = mi.Int32(dr.clip(dr.floor(q), 0, n - 1))
+            i = cell_index(q, n, mi.Int32)
             idx.append(i)
             rel.append(q - mi.Float(i))
         cell = mi.UInt32((idx[2] * self.res[1] + idx[1]) * self.res[0] + idx[0])

@@ -74,7 +74,7 @@ from arches_render.field.heightfield import Heightfield
 from arches_render.field.node import finite_box
 from arches_render.field.operators import Difference, Intersection, Union
 from arches_render.field.primitives import Box
-from arches_render.mesh.polygonize import MAX_VOXELS, TriangleMesh, default_voxel, field_normals
+from arches_render.mesh.polygonize import MAX_VOXELS, TriangleMesh, default_voxel, oriented_mesh
 
 from .erosion_node import Erosion
 from .implicit_heightfield import R0_FACTOR, ImplicitHeightfield
@@ -488,12 +488,7 @@ def _mesh(node, vol, lo, voxel, mask=None, normals=True) -> TriangleMesh:
     verts = (verts + lo).astype(np.float32)
     if not normals:
         return TriangleMesh(verts, faces.astype(np.uint32), np.zeros((0, 3), dtype=np.float32))
-    normals = field_normals(node, verts.astype(np.float64), 0.25 * voxel)
-    faces = faces.astype(np.int64)
-    a, b, c = (verts[faces[:, i]] for i in range(3))
-    if np.einsum("ij,ij->", np.cross(b - a, c - a), normals[faces].sum(axis=1), dtype=np.float64) < 0:
-        faces = faces[:, ::-1]
-    return TriangleMesh(verts, faces.astype(np.uint32), normals)
+    return oriented_mesh(node, verts, faces, voxel)
 
 
 def polygonize_banded(node: Node, voxel: float | None = None, progress=None,

@@ -28,7 +28,9 @@ Sea
     With ``sea_level``, a flat ring at that level from the tile's border to
     ``reach`` (the water inside the tile is the scene's own, e.g. amplify's
     ``water.ply``): where the far ground lies below the sea, the sea reaches the
-    horizon.
+    horizon. It is cut into rectangular bands at the rings' distances
+    (:func:`sea_ring_mesh`), so that no triangle near the tile is thousands of
+    kilometres long.
 
 Scene table (``[[far_field]]``, one per heightfield)::
 
@@ -51,7 +53,7 @@ import trimesh
 
 from arches_render.field import Heightfield
 
-__all__ = ["FarField", "far_field_mesh", "sea_ring_mesh", "parse_far_field", "default_reach"]
+__all__ = ["FarField", "far_field_mesh", "sea_ring_mesh", "ring_distances", "parse_far_field", "default_reach"]
 
 _GROWTH = 1.35  # ring distance ratio
 
@@ -167,10 +169,7 @@ def far_field_mesh(node, reach=None):
     border = (H + lift)[loop[:, 0], loop[:, 1]]  # the frame's border vertices, shared exactly
     xy = np.column_stack([x0 + loop[:, 1] * dx, y0 + loop[:, 0] * dy])
     spacing = min(dx, dy)
-    s = [0.0, max(dx, dy)]
-    while s[-1] * _GROWTH < reach:
-        s.append(s[-1] * _GROWTH)
-    s.append(reach)
+    s = ring_distances(max(dx, dy), reach)
     off = sum(len(v) for v in V)
     prev = None
     for sk in s:
@@ -193,17 +192,66 @@ def far_field_mesh(node, reach=None):
     return trimesh.Trimesh(mesh.vertices, faces, process=False)
 
 
-def sea_ring_mesh(extent, level, reach):
-    """A flat ring at ``level`` from the rectangle ``extent`` to ``reach`` beyond it (upward faces)."""
+def ring_distances(first: float, reach: float) -> list:
+    """Distances of the rings from the border: ``0, first``, then ``x 1.35`` each, and ``reach``.
+
+    Parameters
+    ----------
+    first : float
+        The first ring's distance (metres, > 0).
+    reach : float
+        The last ring's distance (metres).
+
+    Returns
+    -------
+    list of float
+    """
+    s = [0.0, float(first)]
+    while s[-1] * _GROWTH < reach:
+        s.append(s[-1] * _GROWTH)
+    s.append(float(reach))
+    return s
+
+
+def sea_ring_mesh(extent, level, reach, first=None):
+    """A flat ring at ``level`` from the rectangle ``extent`` to ``reach`` beyond it (upward faces).
+
+    The ring is a band of rectangles at :func:`ring_distances` from the border
+    (``first``: default a 64th of the longer side), not one band of four quads: a
+    triangle reaching from the shore to ``reach`` (10,000 km) put Mitsuba's hit
+    points near the shore kilometres off (float32 barycentrics of such a triangle;
+    the ``position`` AOV 9 km away at 40 m from the camera, and shadow rays leaving
+    from there), while a triangle about as long as its distance from the tile keeps
+    them within float32 precision of the ray's own ``o + t d``.
+
+    Parameters
+    ----------
+    extent : sequence of 4 floats
+        The tile ``(x0, y0, x1, y1)``.
+    level : float
+        The sea level (z).
+    reach : float
+        Distance of the outer edge from the tile (metres).
+    first : float, optional
+        Distance of the first ring.
+
+    Returns
+    -------
+    trimesh.Trimesh
+    """
     x0, y0, x1, y1 = extent
-    inner = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
-    outer = [(x0 - reach, y0 - reach), (x1 + reach, y0 - reach), (x1 + reach, y1 + reach), (x0 - reach, y1 + reach)]
-    V = np.array([(x, y, level) for x, y in outer + inner], np.float64)
+    first = max(x1 - x0, y1 - y0) / 64.0 if first is None else float(first)
+    V = []
+    for sk in ring_distances(first, reach):
+        V += [(x0 - sk, y0 - sk, level), (x1 + sk, y0 - sk, level), (x1 + sk, y1 + sk, level),
+              (x0 - sk, y1 + sk, level)]
     F = []
-    for q in range(4):
-        o0, o1, i0, i1 = q, (q + 1) % 4, 4 + q, 4 + (q + 1) % 4
-        F += [(o0, o1, i1), (o0, i1, i0)]
-    return trimesh.Trimesh(V, np.array(F), process=False)
+    for k in range(len(V) // 4 - 1):
+        i, o = 4 * k, 4 * (k + 1)  # the inner and outer rectangles
+        for q in range(4):
+            o0, o1, i0, i1 = o + q, o + (q + 1) % 4, i + q, i + (q + 1) % 4
+            F += [(o0, o1, i1), (o0, i1, i0)]
+    return trimesh.Trimesh(np.array(V, np.float64), np.array(F), process=False)
 
 
 def _mitsuba_mesh(name, mesh, bsdf):

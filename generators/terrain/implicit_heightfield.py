@@ -93,7 +93,7 @@ from arches_render.backend import variant
 from arches_render.field import Heightfield
 from arches_render.field.heightfield import height_grid
 from arches_render.field.lod import OctaveLOD
-from arches_render.field.node import box_distance, box_gap, box_reach, opaque_float
+from arches_render.field.node import box_distance, box_gap, box_reach, clip_index, opaque_float
 from arches_render.field.noise import fbm, fbm_lipschitz, fbm_range
 
 from .falloff import G_SLOPE, falloff_slope_max, g_dr, sigmoid_coefficients, sigmoid_dr, sigmoid_slope
@@ -274,8 +274,8 @@ class ImplicitHeightfield(Heightfield):
         v = self.elevation(p.x, p.y, level) - p.z
         fP, dP = self._prism(p)
         f = dr.minimum(sigmoid_dr(v, self._R, self._a, self._b), fP)
-        u = dr.clip((p.x - self._x0) * self._inv_dx, 0.0, self.nx - 1.0)
-        w = dr.clip((p.y - self._y0) * self._inv_dy, 0.0, self.ny - 1.0)
+        u = clip_index((p.x - self._x0) * self._inv_dx, 0.0, self.nx - 1.0)
+        w = clip_index((p.y - self._y0) * self._inv_dy, 0.0, self.ny - 1.0)
         k = dr.minimum(mi.UInt32(w), self.ny - 2) * self.nx + dr.minimum(mi.UInt32(u), self.nx - 2)
         above = [p.z - dr.gather(mi.Float, maxima, k) - self._extra for maxima in self._maxima]
         if direction is not None:
