@@ -59,9 +59,11 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from .falloff import falloff_slope_max
+from arches_render.field.node import box_distance
 
-__all__ = ["level_bound", "core_bound", "local_slope"]
+from .falloff import G_SLOPE, falloff_slope_max
+
+__all__ = ["level_bound", "core_bound", "local_slope", "footprint_error", "quiet_within"]
 
 
 def level_bound(node, k, e, geometry, u, rate=None):
@@ -110,3 +112,26 @@ def local_slope(node, k, e, geometry, radius, rate=None):
     # rho >= D_max and the clamp to 1 makes it exact too).
     x = dr.minimum(rho * dr.rcp(dr.maximum(D, 1e-30)), 1.0)
     return dr.abs(e) * falloff_slope_max(x - radius * Ld, x + radius * Ld) * Ld
+
+
+def footprint_error(node, radius):
+    """Bound of ``|F_fp - F|`` for footprints up to ``radius`` (a float): a truncated star
+    noise moves ``D`` by at most ``R A dn`` (``dn`` the unit noise's truncation error), so
+    ``d~ = rho / D`` by at most ``D_max R A dn / D_min^2`` inside the support, and each
+    primitive's value by ``|e| G_SLOPE A dn (1 + span) / (1 - span)^2``; a point sums at
+    most ``value_max - value_min`` of energy (``value_max`` for ``"max"``)."""
+    if not node.noise:
+        return 0.0
+    nz = node.noise
+    span = nz["span"]
+    per_energy = G_SLOPE * nz["amplitude"] * node._lod.error_within(radius) * (1.0 + span) / (1.0 - span) ** 2
+    return per_energy * (node.value_max if node.combine == "max" else node.value_max - node.value_min)
+
+
+def quiet_within(node, p, reach):
+    """Whether no primitive's support lies within ``reach`` of the points ``p``: the 3x3x3
+    slope table of their cell is 0 (it covers one cell edge around it), or they are
+    farther than ``reach`` from the grid that holds every support."""
+    cell, stored, _, inside = node._cell(p)
+    quiet = inside & (dr.gather(mi.Float, node._cell_L, cell, stored) == 0.0) & (reach <= node.cell)
+    return quiet | (~inside & (box_distance(p, node._glo_box[0], node._glo_box[1]) > reach))

@@ -81,13 +81,13 @@ import mitsuba as mi
 import numpy as np
 
 from arches_render.field.lod import OctaveLOD
-from arches_render.field.node import Node, box_distance, box_gap, opaque_float
+from arches_render.field.node import Node, box_distance, opaque_float
 from arches_render.field.noise import fbm, fbm_lipschitz, fbm_range
 from arches_render.field.brick_grid import BrickLayout
 from arches_render.field.primitive_set import empty_distance, grid_lists
 
 from .falloff import G_SLOPE, g_dr
-from .skeletal_bounds import core_bound, level_bound, local_slope
+from .skeletal_bounds import core_bound, footprint_error, level_bound, local_slope, quiet_within
 
 #: Largest radius of the balls in which ``eval_local`` bounds slopes, in cell edges.
 SLOPE_REACH = 0.125
@@ -339,45 +339,27 @@ class SkeletalSet(Node):
         return 2.0 * self._lod.kappa if self.noise else 0.0
 
     def lod_error(self, radius):
-        """Bound of ``|F_fp - F|`` for footprints up to ``radius``: a truncated star noise
-        moves ``D`` by at most ``R A dn`` (``dn`` the unit noise's truncation error), so
-        ``d~ = rho / D`` by at most ``D_max R A dn / D_min^2`` inside the support, and each
-        primitive's value by ``|e| G_SLOPE A dn (1 + span) / (1 - span)^2``; a point sums
-        at most ``value_max - value_min`` of energy (``value_max`` for ``"max"``)."""
-        if not self.noise:
-            return 0.0
-        nz = self.noise
-        span = nz["span"]
-        per_energy = G_SLOPE * nz["amplitude"] * self._lod.error_within(radius) * (1.0 + span) / (1.0 - span) ** 2
-        energy = self.value_max if self.combine == "max" else self.value_max - self.value_min
-        return per_energy * energy
+        """Bound of ``|F_fp - F|`` for footprints up to ``radius`` (:func:`.skeletal_bounds.footprint_error`)."""
+        return footprint_error(self, radius)
 
     # Zero (minus the threshold) outside the supports: no unit-rate falloff.
     unit_falloff = False
 
+    def quiet_within(self, p, reach):
+        """Whether no support lies within ``reach`` of ``p`` (:func:`.skeletal_bounds.quiet_within`)."""
+        return quiet_within(self, p, reach)
+
     def box_range(self, lo, hi):
-        """Exactly ``-threshold`` over a box no support reaches (the 3x3x3 slope table of
-        the cell of its centre is 0, and the box lies within one cell edge of that
-        centre; or the box is off the grid), else the default."""
-        c = mi.Point3f((lo + hi) * 0.5)
-        reach = dr.norm(hi - lo) * 0.5
-        cell, stored, _, inside = self._cell(c)
-        quiet = inside & (dr.gather(mi.Float, self._cell_L, cell, stored) == 0.0) & (reach <= self.cell)
-        far = box_gap(lo, hi, self._glo_box[0], self._glo_box[1]) > 0.0
+        """Exactly ``-threshold`` over a box no support reaches (:meth:`quiet_within` its
+        centre by its half-diagonal), else the default."""
+        zero = self.quiet_within(mi.Point3f((lo + hi) * 0.5), dr.norm(hi - lo) * 0.5)
         a, b = super().box_range(lo, hi)
-        zero = quiet | far
         return dr.select(zero, -self._threshold, a), dr.select(zero, -self._threshold, b)
 
     def local_lod_error(self, p, reach, radius):
-        """:meth:`lod_error` where some primitive's support may lie within ``reach`` of ``p``
-        (a cell's 3x3x3 slope table is 0 where none does), 0 elsewhere."""
+        """:meth:`lod_error` where some support may lie within ``reach`` of ``p``, else 0."""
         full = self.lod_error(radius)
-        if not full:
-            return 0.0
-        cell, stored, _, inside = self._cell(p)
-        quiet = inside & (dr.gather(mi.Float, self._cell_L, cell, stored) == 0.0) & (reach <= self.cell)
-        far = ~inside & (box_distance(p, self._glo_box[0], self._glo_box[1]) > reach)
-        return dr.select(quiet | far, 0.0, full)
+        return dr.select(self.quiet_within(p, reach), 0.0, full) if full else 0.0
 
     def primitive_boxes(self):
         """Per-primitive support boxes ``(lo (N, 3), hi (N, 3))``: outside its box a
