@@ -14,6 +14,7 @@ Used by ``trace_steps_by_ray_type`` (``bench_tracing.py``) and by hand::
 
 from __future__ import annotations
 
+import os
 import sys
 
 import drjit as dr
@@ -125,5 +126,5 @@ def main(argv):
 
 
 if __name__ == "__main__":
-    sys.path.insert(0, str(__import__("pathlib").Path(__file__).parent))
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     sys.exit(main(sys.argv[1:]))

@@ -163,15 +163,17 @@ def test_cli_view_and_bad_view(flat, capsys):
     for view in ("aces", "srgb"):
         out = flat.parent / f"{view}.exr"
         assert main(["render", str(flat), "-o", str(out), "--spp", "2", "--view", view, "--no-aovs", "-q"]) == 0
-        exr, png = read_exr(out).rgb, iio.imread(out.with_suffix(".png"))[..., :3].astype(int)
+        image = read_exr(out)
+        exr, png = image.rgb, iio.imread(out.with_suffix(".png"))[..., :3].astype(int)
+        exposure = float(image.header["exposure"])   # metered: the scene sets none
         assert png.shape == exr.shape
-        # The PNG is the named view of this very EXR (within a rounding step).
-        assert np.abs(png - view_to_uint8(exr, view).astype(int)).max() <= 1, view
-        pngs[view] = (exr, png)
-    (exr_a, aces), (exr_s, srgb) = pngs["aces"], pngs["srgb"]
+        # The PNG is the named view of this very EXR at the exposure its header records (within a rounding step).
+        assert np.abs(png - view_to_uint8(exr, view, exposure).astype(int)).max() <= 1, view
+        pngs[view] = (exr, png, exposure)
+    (exr_a, aces, _), (exr_s, srgb, exposure) = pngs["aces"], pngs["srgb"]
     assert np.array_equal(exr_a, exr_s)  # same seed: the views differ, the pixels do not
-    # The sRGB PNG is the plain sRGB encoding (IEC 61966-2-1, by colour-science) of the clipped EXR.
-    want = np.round(255 * colour.cctf_encoding(np.clip(exr_s, 0, 1), function="sRGB")).astype(int)
+    # The sRGB PNG is the plain sRGB encoding (IEC 61966-2-1, by colour-science) of the exposed, clipped EXR.
+    want = np.round(255 * colour.cctf_encoding(np.clip(exr_s * 2.0 ** exposure, 0, 1), function="sRGB")).astype(int)
     assert np.abs(srgb - want).max() <= 1
     # ACES tone-maps: other values, the same order of brightness.
     assert np.abs(aces - srgb).mean() > 5
