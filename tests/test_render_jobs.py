@@ -54,6 +54,35 @@ def test_scene_cache_sees_edits_of_files_the_scene_names(tmp_path):
     assert scene_inputs(scene) == scene_inputs(scene)
 
 
+def test_modes_of_one_scene_load_and_polygonize_it_once(tmp_path, monkeypatch):
+    """Field and mesh, with and without AOVs: one load of the scene (its generators run
+    once) and one marching-cubes mesh; each mode renders as from a cold process."""
+    from arches_render.render import jobs, renderer
+    from arches_render.render.jobs import RenderJob, clear_cache, run_job
+    scene = write_scene(tmp_path, FLAT, "flat")
+    loads, meshes = [], []
+    load, polygonize = jobs.load_scene, renderer.polygonize
+    monkeypatch.setattr(jobs, "load_scene", lambda path: loads.append(path) or load(path))
+    monkeypatch.setattr(renderer, "polygonize", lambda *a, **k: meshes.append(a) or polygonize(*a, **k))
+    clear_cache()
+    modes = [dict(geometry=g, aovs=a) for g in ("field", "mesh") for a in (True, False)]
+    warm = [run_job(RenderJob(scene=str(scene), width=32, height=18, spp=1, **m)) for m in modes]
+    assert len(loads) == 1 and len(meshes) == 1
+    for m, (rgb, layers) in zip(modes, warm):
+        clear_cache()
+        cold_rgb, cold_layers = run_job(RenderJob(scene=str(scene), width=32, height=18, spp=1, **m))
+        assert np.array_equal(rgb, cold_rgb), m
+        assert sorted(layers) == sorted(cold_layers) and all(
+            np.array_equal(layers[k][0], cold_layers[k][0]) for k in layers), m
+    assert len(loads) == 5 and len(meshes) == 3
+    # An edit of the scene loads it anew.
+    clear_cache()
+    run_job(RenderJob(scene=str(scene), width=32, height=18, spp=1))
+    scene.write_text(FLAT.replace("elevation = 50.0", "elevation = 51.0"))
+    run_job(RenderJob(scene=str(scene), width=32, height=18, spp=1))
+    assert len(loads) == 7
+
+
 def test_scene_inputs_follow_the_scene_text(tmp_path):
     from arches_render.render.jobs import scene_inputs
     scene = write_scene(tmp_path, FLAT, "flat")

@@ -33,6 +33,11 @@ __all__ = ["RenderJob", "run_job", "clear_cache", "scene_inputs", "sensor_clip",
 
 _CACHE: "OrderedDict[tuple, tuple]" = OrderedDict()
 _CACHE_SIZE = 4
+# The loaded descriptions (generators run) by scene inputs: the modes and sizes of one
+# scene (field and mesh, with and without AOVs) build from one load. build_scene
+# reads a description and never edits it, so Mitsuba scenes may share one.
+_DESCS: "OrderedDict[tuple, object]" = OrderedDict()
+_DESCS_SIZE = 2
 # One job at a time per process: two threads (a caller's, or a Dask worker's several,
 # though workers now hand their jobs to one render process, render/isolated.py) would
 # otherwise render two frames at once through the same cached scene, one moving the
@@ -104,24 +109,37 @@ class RenderJob:
 
 
 def clear_cache() -> None:
-    """Forget the scenes this process built."""
+    """Forget the scenes this process built and the descriptions it loaded."""
     _CACHE.clear()
+    _DESCS.clear()
+
+
+def _remember(cache: OrderedDict, size: int, key, value):
+    cache[key] = value
+    while len(cache) > size:
+        cache.popitem(last=False)
+    return value
+
+
+def _desc_for(job: RenderJob):
+    path = Path(job.scene).resolve()
+    key = (str(path), scene_inputs(path), job.allow)
+    if key in _DESCS:
+        _DESCS.move_to_end(key)
+        return _DESCS[key]
+    with paths.allowed(job.allow):
+        return _remember(_DESCS, _DESCS_SIZE, key, load_scene(path))
 
 
 def _scene_for(job: RenderJob):
     key = _key(job)
-    path = Path(job.scene).resolve()
     if key in _CACHE:
         _CACHE.move_to_end(key)
         return _CACHE[key]
-    with paths.allowed(job.allow):
-        desc = load_scene(path)
+    desc = _desc_for(job)
     scene = build_scene(desc, job.geometry, job.width, job.height, job.voxel or None, aovs=job.aovs,
                         crop=job.crop, moments=job.moments)
-    _CACHE[key] = (desc, scene)
-    while len(_CACHE) > _CACHE_SIZE:
-        _CACHE.popitem(last=False)
-    return desc, scene
+    return _remember(_CACHE, _CACHE_SIZE, key, (desc, scene))
 
 
 def prime_cache(job: RenderJob, desc, scene) -> None:

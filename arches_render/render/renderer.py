@@ -18,6 +18,7 @@ bitwise reproducible for a given scene, seed and spp.
 from __future__ import annotations
 
 import math
+import weakref
 
 import drjit as dr
 import mitsuba as mi
@@ -122,9 +123,20 @@ def sensor_dict(desc, width, height, crop=None) -> dict:
     }
 
 
+# Field tree -> {voxel: TriangleMesh}; weak, so a tree's meshes go with it.
+_POLYGONS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
 def field_mesh_shape(desc, bsdf, voxel=None, progress=None):
-    """A Mitsuba mesh of the field's marching-cubes surface, shaded by ``bsdf``."""
-    tri = polygonize(desc.field, voxel or desc.render.voxel or None, progress)
+    """A Mitsuba mesh of the field's marching-cubes surface, shaded by ``bsdf``.
+
+    The triangles are kept per field tree and voxel while the tree lives, so the mesh
+    modes of one loaded scene (with and without AOVs, other sizes) polygonize once."""
+    voxel = voxel or desc.render.voxel or None
+    by_voxel = _POLYGONS.setdefault(desc.field, {})
+    if voxel not in by_voxel:
+        by_voxel[voxel] = polygonize(desc.field, voxel, progress)
+    tri = by_voxel[voxel]
     props = mi.Properties()
     props["bsdf"] = bsdf
     mesh = mi.Mesh("field", len(tri.vertices), len(tri.faces), props, has_vertex_normals=True)
