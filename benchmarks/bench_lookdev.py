@@ -12,6 +12,13 @@
                         tiling, no detail, strata, cavity or wetness) and no
                         atmosphere, same run (the rock piles' preset material, which has
                         no scene-level switch, is the same in both). Baseline: the goal, 1.3.
+``lookdev_default_mesh_ratio``  seconds of ``scenes/default.toml`` in mesh mode (its
+                        marching-cubes mesh, 320x180, 16 spp, warm kernels, mesh built
+                        outside the timing) with its triplanar look over the same with
+                        a plain diffuse material, same run: what the look costs where it
+                        is shaded once per vertex by ``implicit_path`` (issue 33 part 2).
+                        Baseline: the goal of ``lookdev_cost_ratio``, 1.3. Extra fields:
+                        both times, both integrators, the load.
 """
 
 from __future__ import annotations
@@ -32,6 +39,9 @@ sys.path.insert(0, str(REPO / "examples"))
 import make_gallery  # noqa: E402  (the gallery's list of renders lives with the script that makes it)
 
 COMBINED = REPO / "scenes" / "gallery" / "every_generator.toml"
+DEFAULT = REPO / "scenes" / "default.toml"
+#: The plain material of ``lookdev_default_mesh_ratio``: a sandstone-like grey-brown.
+PLAIN_DIFFUSE = {"type": "diffuse", "color": [0.35, 0.3, 0.25]}
 LOOK_KEYS = ("strata", "cavity", "wetness", "masks")
 
 
@@ -70,6 +80,14 @@ def plain_document(doc: dict) -> dict:
     return doc
 
 
+def diffuse_document(doc: dict) -> dict:
+    """``doc`` with every triplanar material replaced by :data:`PLAIN_DIFFUSE` (the
+    atmosphere kept: the ratio measures the material alone)."""
+    materials = {name: dict(PLAIN_DIFFUSE) if mat.get("type", "triplanar") == "triplanar" else mat
+                 for name, mat in doc.get("materials", {}).items()}
+    return dict(doc, materials=materials)
+
+
 def parse_plain(doc: dict, path):
     """:func:`parse_scene` of a plain document at ``path`` (its data paths resolve
     from there; no file is written), dropping the nodes only the look used (a
@@ -96,7 +114,20 @@ def bench_lookdev_cost_ratio(repeat):
                 load=round(0.5 * (load0 + os.getloadavg()[0]), 2))
 
 
+def bench_lookdev_default_mesh_ratio(repeat):
+    w, h, spp = 320, 180, 16
+    load0 = os.getloadavg()[0]
+    plain = parse_plain(diffuse_document(tomlfile.load(DEFAULT)), DEFAULT)
+    scenes = [build_scene(desc, "mesh", w, h) for desc in (load_scene(DEFAULT), plain)]
+    look, base = median_renders(scenes, spp, repeat)
+    return dict(value=look / base, unit="x", baseline=1.3, baseline_is="goal", look_s=look, plain_s=base,
+                integrators=[str(s.integrator()).split("[")[0] for s in scenes],
+                scene=str(DEFAULT.relative_to(REPO)), resolution=f"{w}x{h}", spp=spp,
+                load=round(0.5 * (load0 + os.getloadavg()[0]), 2))
+
+
 BENCHMARKS = {
     "lookdev_gallery_s": (bench_lookdev_gallery_s, 1),
     "lookdev_cost_ratio": (bench_lookdev_cost_ratio, 3),
+    "lookdev_default_mesh_ratio": (bench_lookdev_default_mesh_ratio, 3),
 }

@@ -5,7 +5,7 @@
 This file holds the foundation's benchmarks, ``bench_production.py`` the
 production ones (turntables, Dask), ``bench_dask_scale.py`` Dask at scale
 (a tiled 1280x720 still, a 24-frame turntable), ``bench_heightfield.py`` the heightfield cast,
-``bench_lookdev.py`` the gallery's cost and the look's,
+``bench_lookdev.py`` the gallery's cost and the look's (on the field and on the default scene's mesh),
 ``bench_tracing.py`` the direct tracer's (level of detail, pruning). Each generator keeps its own in its package
 (``generators/NAME/benchmarks.py``), declared as ``BENCHMARKS = {name: (fn, repeat)}``
 with ``fn(repeat) -> dict(value, unit, baseline, baseline_is, ...)`` in the

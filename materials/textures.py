@@ -24,18 +24,23 @@ the histogram-preserving blending of randomly offset tiles of Heitz and Neyret
    keeps the texture's contrast instead of washing it out as a linear blend does.
 4. **Back to the texture's histogram**: ``T = F_T^-1(Phi(g))``.
 
-Filtering (a deviation, documented): Heitz and Neyret pre-filter the look-up table
-per MIP level. Our layer textures are sampled without MIP maps, so the footprint
-of a pixel (``footprint``, metres, see :mod:`arches_render.materials.detail`) selects
-a level ``l = log2(footprint / texel)`` and the table of that level,
+Filtering. Heitz and Neyret pre-filter the Gaussian texture with MIP maps and the
+look-up table per level; so do we. The pixel footprint (``footprint``, metres, see
+:mod:`arches_render.materials.detail`: the camera's pixel at the first vertex, the
+integrator's ray cone after a bounce) selects a level ``l`` of the Gaussian
+texture's pyramid ``G_l`` (:mod:`arches_render.materials.mipmap`: box filter, one
+level per shading point chosen stochastically between the two around
+``log2(footprint / texel)``), whose standard deviation is ``s_l`` (relative to
+level 0). The blend of step 3 then has standard deviation ``s_l``, so step 4 reads
+``T = F_l(Phi(g / s_l))`` from the table of that level,
 ``F_l(u) = E_z[F_T^-1(Phi(s_l Phi^-1(u) + sqrt(1 - s_l^2) z))]`` with ``z ~ N(0, 1)``
-(Gauss-Hermite quadrature), where ``s_l`` is the standard deviation of the
-Gaussian texture box-filtered to level ``l``. At level 0 this is ``F_T^-1``; as the
-footprint covers the whole texture (``s_l -> 0``) it tends to the texture's mean,
-which is what an area-filtered lookup returns. A pixel thus averages to the right
-value at every distance and the unfiltered lookups no longer alias: their
-contrast fades with the footprint. The level is interpolated linearly
-(the table is a 2-D texture: ``u`` along x, level along y).
+(Gauss-Hermite quadrature): the expected texel given the filtered Gaussian value,
+the part of ``G`` finer than the footprint (variance ``1 - s_l^2``) integrated out.
+At level 0 this is ``F_T^-1``; as the footprint covers the whole texture (``s_l ->
+0``) it tends to the texture's mean, which is what an area-filtered lookup returns,
+and the last level is that mean without a lookup. A pixel thus averages to the right
+value at every distance and the lookups do not alias: the texture blurs with the
+footprint instead of sparkling.
 
 ``tiling = "bands"`` offsets the tiles along the texture's ``u`` only, for banded
 textures (``strata.png``) whose rows must stay aligned so that bands stay
@@ -62,6 +67,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 from scipy import special
+
+from .mipmap import MipTexture, mip_levels
 
 __all__ = ["TEXTURE_DIR", "TILINGS", "TRIANGLE_EDGE", "texture_path", "load_texture", "RepeatTexture",
            "HistogramTexture", "average_ranks", "gaussianize", "filter_tables", "triangle_grid"]
@@ -194,19 +201,15 @@ def filter_tables(gauss: np.ndarray, lut: np.ndarray) -> tuple[np.ndarray, np.nd
     tables : numpy.ndarray
         ``(levels, LUT_SIZE, C)`` float32, ``F_l`` per level ``l = 0 .. log2(min(H, W))``.
     sigma : numpy.ndarray
-        ``(levels,)`` the relative standard deviation ``s_l`` of each level.
+        ``(levels,)`` the relative standard deviation ``s_l`` of each level of the
+        pyramid (:func:`~arches_render.materials.mipmap.mip_levels`).
     """
-    h, w, c = gauss.shape
-    levels = int(math.log2(min(h, w))) + 1
-    g = gauss.astype(np.float64)
-    sd0 = g.std()
-    sig = []
-    for _ in range(levels):
-        sig.append(min(float(g.std() / sd0), 1.0))
-        hh, ww = g.shape[0] // 2 * 2, g.shape[1] // 2 * 2
-        if hh >= 2 and ww >= 2:
-            g = g[:hh, :ww].reshape(hh // 2, 2, ww // 2, 2, c).mean(axis=(1, 3))
+    c = gauss.shape[2]
+    pyramid = mip_levels(gauss)
+    sd0 = pyramid[0].std()
+    sig = [min(float(g.std() / sd0), 1.0) for g in pyramid]
     sig[-1] = 0.0  # the whole texture in one footprint: its mean
+    levels = len(sig)
     z, wz = np.polynomial.hermite_e.hermegauss(HERMITE_NODES)
     wz = wz / wz.sum()
     x = special.ndtri((np.arange(LUT_SIZE) + 0.5) / LUT_SIZE)
@@ -260,16 +263,18 @@ def triangle_grid(uv, edge=TRIANGLE_EDGE):
 
 
 class RepeatTexture:
-    """A texture repeated every period (``tiling = "repeat"``): one bilinear lookup."""
+    """A texture repeated every period (``tiling = "repeat"``): one bilinear lookup on the
+    MIP level of the footprint (:class:`~arches_render.materials.mipmap.MipTexture`)."""
 
     def __init__(self, arr: np.ndarray):
         self.channels = arr.shape[2]
-        self.tex = _texture2f(arr, dr.WrapMode.Repeat)
-        self.texels = min(arr.shape[0], arr.shape[1])
+        self.pyramid = MipTexture(arr)
+        self.texels = self.pyramid.texels
 
-    def eval(self, uv, footprint=None, active=True):
-        """Texel at ``uv`` (texture periods); ``footprint`` is ignored. Returns ``mi.Color3f``."""
-        return _colour(self.tex.eval(uv, active))
+    def eval(self, uv, footprint=None, active=True, xi=None):
+        """Texel at ``uv`` (texture periods) under a ``footprint`` in texels (``None``: full
+        detail), the level chosen by ``xi`` (:meth:`MipTexture.level`). Returns ``mi.Color3f``."""
+        return _colour(self.pyramid.eval(uv, self.pyramid.level(footprint, xi), active))
 
 
 class HistogramTexture:
@@ -289,20 +294,25 @@ class HistogramTexture:
         gauss, lut = gaussianize(arr)
         tables, sigma = filter_tables(gauss, lut)
         self.channels = arr.shape[2]
-        self.texels = min(arr.shape[0], arr.shape[1])
+        self.gauss = MipTexture(gauss)
+        self.texels = self.gauss.texels
         self.levels = tables.shape[0]
         self.sigma = sigma
+        # 1 / s_l per level, gathered by the chosen level (the last, s = 0, is never read).
+        self.inv_sigma = mi.Float(1.0 / np.maximum(sigma, 1e-6))
+        # Opaque: a literal would tie the kernels to the texture's content.
+        self.mean = [dr.opaque(mi.Float, float(tables[-1, :, k].mean())) for k in range(self.channels)]
         self.bands = bool(bands)
-        self.gauss = _texture2f(gauss, dr.WrapMode.Repeat)
         # Level along y, u along x; clamped at both ends.
         self.lut = _texture2f(tables, dr.WrapMode.Clamp)
         self.seed = dr.opaque(mi.UInt32, int(seed) & 0xFFFFFFFF)
 
-    def level(self, footprint):
-        """Continuous filter level of a footprint given in texels (0: full detail)."""
-        return dr.clip(dr.log2(dr.maximum(footprint, 1.0)), 0.0, self.levels - 1.0)
+    def level(self, footprint, xi=None):
+        """The pyramid level of a footprint given in texels (0: full detail), see
+        :meth:`~arches_render.materials.mipmap.MipTexture.level`."""
+        return self.gauss.level(footprint, xi)
 
-    def eval(self, uv, footprint=None, active=True):
+    def eval(self, uv, footprint=None, active=True, xi=None):
         """Tiled texel at ``uv`` (texture periods).
 
         Parameters
@@ -311,30 +321,42 @@ class HistogramTexture:
         footprint : mi.Float, optional
             Pixel footprint in texels (``None``: full detail).
         active : mi.Bool
+        xi : mi.Float, optional
+            Uniform number that chooses the MIP level (``None``: the nearest).
 
         Returns
         -------
         mi.Color3f
         """
-        weights, verts = triangle_grid(uv)
-        g = [mi.Float(0.0) for _ in range(self.channels)]
-        for w, (i, j) in zip(weights, verts):
-            ox, oy = _hash2(i, j, self.seed)
-            if self.bands:
-                oy = mi.Float(0.0)
-            v = self.gauss.eval(mi.Point2f(uv.x + ox, uv.y + oy), active)
+        level = self.level(footprint, xi)
+        active = mi.Bool(active)
+
+        def taps(uv, level, *mean):
+            weights, verts = triangle_grid(uv)
+            g = [mi.Float(0.0) for _ in range(self.channels)]
+            for w, (i, j) in zip(weights, verts):
+                ox, oy = _hash2(i, j, self.seed)
+                if self.bands:
+                    oy = mi.Float(0.0)
+                v = self.gauss.eval(mi.Point2f(uv.x + ox, uv.y + oy), level)
+                for k in range(self.channels):
+                    g[k] += w * v[k]
+            norm = dr.rsqrt(dr.maximum(dr.square(weights[0]) + dr.square(weights[1]) + dr.square(weights[2]),
+                                       1e-8)) * dr.gather(mi.Float, self.inv_sigma, level)
+            y = (mi.Float(level) + 0.5) * (1.0 / self.levels)
+            out = []
             for k in range(self.channels):
-                g[k] += w * v[k]
-        norm = dr.rsqrt(dr.maximum(dr.square(weights[0]) + dr.square(weights[1]) + dr.square(weights[2]),
-                                   1e-8))
-        lv = mi.Float(0.0) if footprint is None else self.level(footprint)
-        y = (lv + 0.5) * (1.0 / self.levels)
-        out = []
-        for k in range(self.channels):
-            u = 0.5 * (1.0 + dr.erf(g[k] * norm * (1.0 / math.sqrt(2.0))))
-            # Table texel centres sit at (j + 1/2) / LUT_SIZE, as the quantiles do.
-            out.append(self.lut.eval(mi.Point2f(u, y), active)[k])
-        return _colour(out)
+                u = 0.5 * (1.0 + dr.erf(g[k] * norm * (1.0 / math.sqrt(2.0))))
+                # Table texel centres sit at (j + 1/2) / LUT_SIZE, as the quantiles do.
+                out.append(self.lut.eval(mi.Point2f(u, y))[k])
+            return tuple(out)
+
+        # The last level is the texture's mean: packets entirely there take no lookup. (The
+        # mean travels as state: a false branch returning values that are not among its
+        # inputs met a Dr.Jit 1.5 code-generation bug once nested in another branch.)
+        out = dr.if_stmt((uv, level, *self.mean), active & (level < self.levels - 1), taps,
+                         lambda uv, level, *mean: mean, label="histogram_taps")
+        return _colour(list(out))
 
 
 def load_texture(name: str, srgb: bool = True, normalize: bool = True, tiling: str = "histogram",

@@ -11,11 +11,19 @@ Shading model, per shading point ``p`` with normal ``n``:
 
 * projection weights ``b_k = |n_k|^s / sum_j |n_j|^s`` (``s = sharpness``),
 * layer texel ``T_i = sum_k b_k tex_i(uv_k / scale_i)`` with
-  ``uv_x = (p.y, p.z)``, ``uv_y = (p.x, p.z)``, ``uv_z = (p.x, p.y)``,
+  ``uv_x = (p.y, p.z)``, ``uv_y = (p.x, p.z)``, ``uv_z = (p.x, p.y)``; projections
+  with ``b_k < 10^-4`` are dropped and the rest renormalised (error < ``2 10^-4`` of
+  the texture's range, :mod:`~arches_render.materials.weights`), and ``tex_i`` is
+  looked up on the MIP level of the pixel footprint
+  (:mod:`~arches_render.materials.mipmap`),
 * layer albedo ``a_i = clamp(tint_i T_i, 0, 1)``,
 * coverage ``c_i = coverage_i * H_i(p.z) * S_i(slope) * M_i(p)`` (``c_0 = 1``),
   composite weight ``w_i = c_i prod_{j>i} (1 - c_j)``,
 * BRDF: the weighted sum of the layers' qualitative Oren–Nayar lobes.
+
+Cost: a layer whose weight is 0 in every lane of a SIMD packet, and a projection
+dropped in every lane, are symbolic branches that the packet skips; so flat ground
+under one layer costs one projection of one texture, not three of each layer.
 
 Parameters that change between renders live in opaque Dr.Jit arrays
 (editable through :func:`mitsuba.traverse`), so editing them re-uses the
@@ -59,8 +67,9 @@ import mitsuba as mi
 from ..backend import variant_class
 from . import masks as M
 from .detail import DETAIL_KEYS, Detail, footprint
+from .mipmap import position_hash
 from .textures import TEXTURE_DIR, TILINGS, load_texture, texture_path
-from .weights import band, composite_weights, smoothstep01, triplanar_weights
+from .weights import band, blend_projections, composite_weights, projection_slots, smoothstep01, triplanar_weights
 
 __all__ = ["MAX_LAYERS", "TEXTURE_DIR", "STRUCTURAL", "Layer", "triplanar_dict", "texture_path", "register",
            "TriplanarBSDF"]
@@ -73,8 +82,6 @@ STRUCTURAL = ("layer_count", "detail_octaves", "strata_count", "strata_layer", "
 # Stand-in for an unbounded rule: finite so that ``bound - x`` never meets
 # ``inf - inf`` in the coverage ramps, yet far beyond any terrain.
 _UNBOUNDED = 1e30
-# Projections weaker than this skip their texture fetch (error < 0.01 %).
-_MIN_PROJECTION = 1e-4
 
 # Per-layer property suffixes and their defaults (the rule defaults always hold).
 _LAYER_FLOATS = {
@@ -402,58 +409,81 @@ class _TriplanarImpl:
             cov.append(dr.clip(c, 0.0, 1.0))
         return composite_weights(cov)
 
-    def _texel(self, i, p, b, fp, active):
-        """Triplanar texture value of layer ``i`` (a Color3f, 1 where untextured)."""
+    def _texel(self, i, slots, fp, xi):
+        """Triplanar texture value of layer ``i`` (a Color3f, 1 where untextured): the blend of
+        its projections (``slots``, :func:`~.weights.blend_projections`), each looked up at the
+        MIP level of the footprint ``fp`` (metres) chosen by ``xi``."""
         tex = self.textures[i]
         if tex is None:
             return mi.Color3f(1.0)
         inv = dr.rcp(self.params["scale"][i])
         texels = fp * inv * tex.texels  # the footprint in texels
-        out = mi.Color3f(0.0)
-        for k, uv in enumerate(((p.y, p.z), (p.x, p.z), (p.x, p.y))):
-            on = active & (b[k] > _MIN_PROJECTION)
-            c = tex.eval(mi.Point2f(uv[0] * inv, uv[1] * inv), texels, on)
-            out += dr.select(on, b[k], 0.0) * c
-        return out
+        return blend_projections(lambda uv, on: tex.eval(uv * inv, texels, on, xi), slots)
 
     def shade(self, si, active=True, cavity=True, cone_radius=None):
         """The shading of ``si``, computed once and shared by :meth:`sample` and
-        :meth:`eval_pdf` (their ``shading`` argument): albedo, the two Oren-Nayar
-        colour terms ``sum w a A``, ``sum w a B``, and the bumped local normal.
-        ``cavity``: lanes that compute the cavity term (a march of field
-        evaluations; the integrator asks for it at the camera ray's hit only).
-        ``cone_radius``: the integrator's ray-cone radius at ``si``, for the
-        footprint (:func:`~arches_render.materials.detail.footprint`)."""
+        :meth:`eval_pdf` (their ``shading`` argument).
+
+        A layer whose weight ``w_i`` is 0 in every lane of a SIMD packet is not
+        evaluated there (a symbolic branch): its texture lookups and, for the
+        strata layer, the resistance node are skipped. Untextured layers other
+        than the strata layer cost a few multiplies and take no branch.
+
+        Parameters
+        ----------
+        si : mi.SurfaceInteraction3f
+        active : mi.Bool
+        cavity : mi.Bool or bool
+            Lanes that compute the cavity term (a march of field evaluations; the
+            integrator asks for it at the camera ray's hit only).
+        cone_radius : mi.Float, optional
+            The integrator's ray-cone radius at ``si``, for the footprint
+            (:func:`~arches_render.materials.detail.footprint`) that picks the MIP
+            level and fades the detail.
+
+        Returns
+        -------
+        tuple
+            ``(albedo, ca, cb, n_local)``: the albedo ``sum w a``, the two Oren-Nayar
+            colour terms ``sum w a A`` and ``sum w a B`` (``mi.Color3f``), and the
+            bumped normal in the local frame (``mi.Vector3f``). Inactive lanes hold zeros.
+        """
         active = mi.Bool(active)
         p = self.position(si, active)
         occ, wet = self._terrain_terms(si, active, cavity)
         w = self._weights(si, p, occ, wet)
         n = mi.Vector3f(si.sh_frame.n)
-        b = triplanar_weights(n, self.sharpness)
+        slots = projection_slots(p, triplanar_weights(n, self.sharpness))
         fp = footprint(si, self.pixel_spread, cone_radius)
+        xi = position_hash(p)  # the MIP level choice (materials/mipmap.py)
         a_fac, r_fac, n_local = mi.Float(1.0), mi.Float(1.0), mi.Vector3f(0.0, 0.0, 1.0)
         if self.detail is not None:
             a_fac, r_fac, n_bumped = self.detail.eval(p, n, fp, active)
             n_local = dr.normalize(si.sh_frame.to_local(n_bumped))
         if self.look.wetness or self.look.cavity:
             r_fac = r_fac * self.look.roughness_factor(wet)
-        strata = self.look.strata_color(si.p) if self.look.strata else None
-        albedo, ca, cb = mi.Color3f(0.0), mi.Color3f(0.0), mi.Color3f(0.0)
+        state = (mi.Color3f(0.0), mi.Color3f(0.0), mi.Color3f(0.0))
         for i in range(self.layer_count):
-            on = active & (w[i] > 0.0)
-            tint = strata if (strata is not None and i == self.look.strata_layer) else self.tint[i]
-            a = tint * self._texel(i, p, b, fp, on) * a_fac
-            a = self.look.albedo_factor(dr.clip(a, 0.0, 1.0), occ, wet) * w[i]
-            s2 = dr.square(dr.clip(self.params["roughness"][i] * r_fac, 0.0, 1.0))
-            one_minus_a = 0.5 * s2 / (s2 + 0.33)
-            # The directional albedo is A + B G(theta_i) with G < 1/2 (G -> 1/2
-            # at grazing), so for sigma < 0.35 the qualitative model reflects
-            # more than the albedo near grazing; capping B at 2 (1 - A) keeps
-            # the energy <= albedo and leaves rougher layers untouched.
-            b_term = dr.minimum(0.45 * s2 / (s2 + 0.09), 2.0 * one_minus_a)
-            albedo += a
-            ca += a * (1.0 - one_minus_a)
-            cb += a * b_term
+            strata = self.look.strata and i == self.look.strata_layer
+
+            def layer(albedo, ca, cb, i=i, strata=strata):
+                tint = self.look.strata_color(si.p) if strata else self.tint[i]
+                a = tint * self._texel(i, slots, fp, xi) * a_fac
+                a = self.look.albedo_factor(dr.clip(a, 0.0, 1.0), occ, wet) * w[i]
+                s2 = dr.square(dr.clip(self.params["roughness"][i] * r_fac, 0.0, 1.0))
+                one_minus_a = 0.5 * s2 / (s2 + 0.33)
+                # The directional albedo is A + B G(theta_i) with G < 1/2 (G -> 1/2
+                # at grazing), so for sigma < 0.35 the qualitative model reflects
+                # more than the albedo near grazing; capping B at 2 (1 - A) keeps
+                # the energy <= albedo and leaves rougher layers untouched.
+                b_term = dr.minimum(0.45 * s2 / (s2 + 0.09), 2.0 * one_minus_a)
+                return albedo + a, ca + a * (1.0 - one_minus_a), cb + a * b_term
+
+            if self.textures[i] is None and not strata:  # a few multiplies: no branch
+                state = layer(*state)
+            else:
+                state = dr.if_stmt(state, active & (w[i] > 0.0), layer, lambda *s: s, label="triplanar_layer")
+        albedo, ca, cb = state
         return albedo, ca, cb, n_local
 
     def _brdf_cos(self, si, wo, active, shading=None):

@@ -191,8 +191,8 @@ def test_triplanar_textures_decode_srgb_colour_and_keep_data_linear(tmp_path):
         warnings.simplefilter("ignore")
         import colour
     iio.imwrite(tmp_path / "grey.png", np.full((4, 4, 3), 128, np.uint8))
-    colour_tex = np.asarray(load_texture(str(tmp_path / "grey.png"), True, False, tiling="repeat").tex.tensor())
-    data_tex = np.asarray(load_texture(str(tmp_path / "grey.png"), False, False, tiling="repeat").tex.tensor())
+    colour_tex = np.asarray(load_texture(str(tmp_path / "grey.png"), True, False, tiling="repeat").pyramid.level_array(0))
+    data_tex = np.asarray(load_texture(str(tmp_path / "grey.png"), False, False, tiling="repeat").pyramid.level_array(0))
     assert np.allclose(colour_tex, colour.cctf_decoding(128 / 255, function="sRGB"), atol=1e-5)
     assert np.allclose(data_tex, 128 / 255, atol=1e-6)
 

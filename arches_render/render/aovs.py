@@ -131,7 +131,8 @@ def aov_channel_names(field_bsdf=None, atmosphere: bool = False, field: bool = F
     return out
 
 
-def primary_aovs(si, field_hit, valid, bsdf, field_bsdf=None, depth=None, steps=None, field_albedo=None) -> list:
+def primary_aovs(si, field_hit, valid, bsdf, field_bsdf=None, depth=None, steps=None, field_albedo=None,
+                 shaded=None) -> list:
     """AOV values of a primary hit, one ``mi.Float`` per channel of :func:`aov_channel_names`.
 
     Parameters
@@ -152,7 +153,9 @@ def primary_aovs(si, field_hit, valid, bsdf, field_bsdf=None, depth=None, steps=
     steps : mi.Float, optional
         Steps the field tracer took on the ray (default 0).
     field_albedo : mi.Color3f, optional
-        The albedo at field hits, where the caller has it (else the BSDF's).
+        The albedo on the lanes ``shaded``, where the caller has it (else the BSDF's).
+    shaded : mi.Bool, optional
+        The lanes of ``field_albedo`` (default: ``field_hit``).
 
     Returns
     -------
@@ -162,8 +165,9 @@ def primary_aovs(si, field_hit, valid, bsdf, field_bsdf=None, depth=None, steps=
     if field_albedo is None:
         albedo = mi.Color3f(bsdf.eval_diffuse_reflectance(si, valid))
     else:
-        rest = mi.Color3f(bsdf.eval_diffuse_reflectance(si, valid & ~field_hit))
-        albedo = dr.select(field_hit, mi.Color3f(field_albedo), rest)
+        shaded = field_hit if shaded is None else shaded
+        rest = mi.Color3f(bsdf.eval_diffuse_reflectance(si, valid & ~shaded))
+        albedo = dr.select(shaded, mi.Color3f(field_albedo), rest)
     albedo = dr.select(valid, albedo, mi.Color3f(0.0))
     n = dr.select(valid, si.sh_frame.n, mi.Vector3f(0.0))
     t = dr.select(valid, si.t if depth is None else depth, zero)

@@ -114,6 +114,7 @@ class _ImplicitPathImpl:
         self.surface_cells = bool(props.get("surface_cells", False))
         self.tracer = None
         self.field_bsdf = None
+        self.shaded_bsdf = None
         self.atmosphere = None
         self.set_pixel_angle(0.0)
 
@@ -123,6 +124,23 @@ class _ImplicitPathImpl:
         self.tracer = make_tracer(field, eps=self.eps, omega=self.omega, max_steps=self.max_steps,
                                   cast=self.heightfield_cast, cells=self.surface_cells)
         self.field_bsdf = bsdf
+        self.shaded_bsdf = bsdf
+
+    def attach_material(self, bsdf):
+        """Shade the vertices whose BSDF is ``bsdf`` once per vertex, as the field's are.
+
+        Mitsuba's ``path`` calls ``sample`` and ``eval_pdf`` separately, and each
+        shades the vertex again (textures, detail and the cavity's march); here one
+        :meth:`shade` serves the AOVs, the light sample and the BSDF sample, and the
+        cavity term is computed at camera hits only.
+
+        Parameters
+        ----------
+        bsdf : mi.BSDF or None
+            A BSDF with ``shade`` (``triplanar``): in mesh mode the field's material
+            on the field's mesh. ``None``: every BSDF is called as Mitsuba's are.
+        """
+        self.shaded_bsdf = bsdf
 
     def attach_atmosphere(self, atmosphere):
         """Fog every path segment with an :class:`~arches_render.render.atmosphere.Atmosphere` (None: off)."""
@@ -237,11 +255,14 @@ class _ImplicitPathImpl:
             # The cone at the hit: shadow rays keep its spread, bounces widen it.
             hit_cone = (cone[0] + cone[1] * dr.select(si.is_valid(), si.t, 0.0), cone[1]) if cone else ()
             L, beta, clear, tr = self.fog_segment(ray, si, L, beta, clear, active)
-            # The field's material shaded once per vertex, for the AOVs, the light
-            # sample and the BSDF sample alike; its cavity term at the camera ray's hit.
-            shading = self.shade_field(si, field_hit, active & (primary | (depth + 1 < self.max_depth)), primary,
-                                       hit_cone)
-            aov = self.record_aovs(scene, ray, si, field_hit, res, tr, active & primary, aov, shading)
+            bsdf = self.bsdf_at(si, ray, field_hit)
+            # The field's material shaded once per vertex (on the field and on meshes that
+            # carry it), for the AOVs, the light sample and the BSDF sample alike; its
+            # cavity term at the camera ray's hit.
+            shaded = self.shaded_lanes(bsdf, field_hit)
+            shading = self.shade_vertex(si, shaded, active & (primary | (depth + 1 < self.max_depth)), primary,
+                                        hit_cone)
+            aov = self.record_aovs(scene, ray, si, field_hit, res, tr, active & primary, aov, shading, shaded)
             counts = count_rays(counts, (res, res), (active & primary, active & ~primary), (0, 1))
 
             # Emission reached by BSDF sampling (environment or area light), MIS-weighted.
@@ -249,12 +270,11 @@ class _ImplicitPathImpl:
                                          clear, active)
 
             active_next = active & si.is_valid() & (depth + 1 < self.max_depth)
-            bsdf = self.bsdf_at(si, ray, field_hit)
-            L, clear, counts = self.next_event(scene, sampler, si, bsdf, shading, field_hit, hit_cone, ctx, L, beta,
+            L, clear, counts = self.next_event(scene, sampler, si, bsdf, shading, shaded, hit_cone, ctx, L, beta,
                                                clear, counts, active_next)
 
             # BSDF sampling.
-            bs, bsdf_weight = self.sample_bsdf(bsdf, shading, field_hit, ctx, si, sampler.next_1d(),
+            bs, bsdf_weight = self.sample_bsdf(bsdf, shading, shaded, ctx, si, sampler.next_1d(),
                                                sampler.next_2d(), active_next)
             valid_ray |= active & si.is_valid()
             ray = si.spawn_ray(si.to_world(bs.wo))
@@ -282,14 +302,34 @@ class _ImplicitPathImpl:
         tr, L_in = atm.segment(ray.o, ray.d, atm.segment_length(ray, si))
         return dr.select(active, L + beta * L_in, L), dr.select(active, beta * tr, beta), clear, tr
 
-    def shade_field(self, si, field_hit, needed, primary, hit_cone):
-        """The field material's shading of the vertex (None when it cannot shade once
-        for all its queries): where ``needed`` on field hits, with its cavity term on
-        camera rays' hits."""
-        if not self.shades_field:
+    def shaded_lanes(self, bsdf, field_hit):
+        """Lanes shaded once per vertex by :attr:`shaded_bsdf`.
+
+        Parameters
+        ----------
+        bsdf : mi.BSDFPtr
+            The vertices' BSDFs (:meth:`bsdf_at`).
+        field_hit : mi.Bool
+            Field hits.
+
+        Returns
+        -------
+        mi.Bool
+            Field hits and mesh hits that carry the same material (``field_hit``
+            when no material shades once).
+        """
+        if not self.shades_once:
+            return field_hit
+        return bsdf == mi.BSDFPtr(self.shaded_bsdf)
+
+    def shade_vertex(self, si, shaded, needed, primary, hit_cone):
+        """The shading of the vertex by :attr:`shaded_bsdf` (None when it cannot shade once
+        for all its queries): where ``needed`` on the lanes ``shaded``, with its cavity
+        term on camera rays' hits."""
+        if not self.shades_once:
             return None
-        return self.field_bsdf.shade(si, needed & si.is_valid() & field_hit, cavity=primary,
-                                     cone_radius=hit_cone[0] if hit_cone else None)
+        return self.shaded_bsdf.shade(si, needed & si.is_valid() & shaded, cavity=primary,
+                                      cone_radius=hit_cone[0] if hit_cone else None)
 
     def emission_hit(self, scene, si, prev_si, prev_pdf, prev_delta, first, L, beta, clear, active):
         """``(L, clear)`` with the emission that BSDF sampling reached at ``si``, weighted by
@@ -307,7 +347,7 @@ class _ImplicitPathImpl:
             clear = (dr.select(visible, clear[0] + clear[1] * w * Le, clear[0]), clear[1])
         return L, clear
 
-    def next_event(self, scene, sampler, si, bsdf, shading, field_hit, hit_cone, ctx, L, beta, clear, counts,
+    def next_event(self, scene, sampler, si, bsdf, shading, shaded, hit_cone, ctx, L, beta, clear, counts,
                    active):
         """``(L, clear, counts)`` after next-event estimation at ``si``: one emitter
         sample, its shadow ray (meshes and field) and the MIS-weighted contribution.
@@ -328,7 +368,7 @@ class _ImplicitPathImpl:
         blocked, res = self.occluded(scene, shadow, active_em, hit_cone or None)
         counts = count_rays(counts, (res,), (active_em,), (2,))
         active_em &= ~blocked
-        bsdf_val, bsdf_pdf = self.eval_pdf(bsdf, shading, field_hit, ctx, si, wo, active_em)
+        bsdf_val, bsdf_pdf = self.eval_pdf(bsdf, shading, shaded, ctx, si, wo, active_em)
         mis = dr.select(ds.delta, 1.0, mis_weight(ds.pdf, bsdf_pdf))
         if clear:
             clear = (dr.select(active_em, clear[0] + clear[1] * mis * bsdf_val * em_weight, clear[0]), clear[1])
@@ -370,32 +410,32 @@ class _ImplicitPathImpl:
         return len(self.aov_names()) - counted - later
 
     @property
-    def shades_field(self):
-        """Whether the field's BSDF can shade a vertex once for all its queries (``shade``)."""
-        return self.tracer is not None and hasattr(self.field_bsdf, "shade")
+    def shades_once(self):
+        """Whether :attr:`shaded_bsdf` can shade a vertex once for all its queries (``shade``)."""
+        return hasattr(self.shaded_bsdf, "shade")
 
-    def eval_pdf(self, bsdf, shading, field_hit, ctx, si, wo, active):
-        """``bsdf.eval_pdf``, with the field's vertices from their ``shading``."""
+    def eval_pdf(self, bsdf, shading, shaded, ctx, si, wo, active):
+        """``bsdf.eval_pdf``, with the ``shaded`` lanes from their ``shading``."""
         if shading is None:
             return bsdf.eval_pdf(ctx, si, wo, active)
-        vf, pf = self.field_bsdf.eval_pdf(ctx, si, wo, active & field_hit, shading)
-        vm, pm = bsdf.eval_pdf(ctx, si, wo, active & ~field_hit)
-        return dr.select(field_hit, vf, vm), dr.select(field_hit, pf, pm)
+        vf, pf = self.shaded_bsdf.eval_pdf(ctx, si, wo, active & shaded, shading)
+        vm, pm = bsdf.eval_pdf(ctx, si, wo, active & ~shaded)
+        return dr.select(shaded, vf, vm), dr.select(shaded, pf, pm)
 
-    def sample_bsdf(self, bsdf, shading, field_hit, ctx, si, sample1, sample2, active):
-        """``bsdf.sample``, with the field's vertices from their ``shading``."""
+    def sample_bsdf(self, bsdf, shading, shaded, ctx, si, sample1, sample2, active):
+        """``bsdf.sample``, with the ``shaded`` lanes from their ``shading``."""
         if shading is None:
             return bsdf.sample(ctx, si, sample1, sample2, active)
-        bf, wf = self.field_bsdf.sample(ctx, si, sample1, sample2, active & field_hit, shading)
-        bm, wm = bsdf.sample(ctx, si, sample1, sample2, active & ~field_hit)
-        return dr.select(field_hit, bf, bm), dr.select(field_hit, wf, wm)
+        bf, wf = self.shaded_bsdf.sample(ctx, si, sample1, sample2, active & shaded, shading)
+        bm, wm = bsdf.sample(ctx, si, sample1, sample2, active & ~shaded)
+        return dr.select(shaded, bf, bm), dr.select(shaded, wf, wm)
 
-    def record_aovs(self, scene, ray, si, field_hit, res, tr, first, old, shading=None):
+    def record_aovs(self, scene, ray, si, field_hit, res, tr, first, old, shading=None, shaded=None):
         """The AOV values of the camera rays' hits (lanes ``first``), in the order of
         :meth:`aov_names`; ``old`` elsewhere (``()`` without AOVs). ``res``: the field
         query's :class:`~.march.TraceResult` (None without a field); ``tr``: the camera
         segment's transmittance (None without an atmosphere); ``shading``: the
-        vertex's field shading, whose albedo it reuses.
+        vertex's shading (:meth:`shade_vertex`) on the lanes ``shaded``, whose albedo it reuses.
 
         Recorded at the path's first vertex, so no second primary trace is
         needed; packets without a first-vertex lane skip the shading it takes."""
@@ -408,14 +448,14 @@ class _ImplicitPathImpl:
         # camera centre instead, at the unlifted hit point.
         centre = scene.sensors()[0].world_transform().translation()
         extra = () if tr is None else (tr,)
-        known = () if albedo is None else (albedo,)
+        known = () if albedo is None else (albedo, field_hit if shaded is None else shaded)
 
         def compute(si, field_hit, steps, first, known, *extra):
             valid = first & si.is_valid()
             bsdf = self.bsdf_at(si, ray, field_hit)
             depth = dr.norm(ray.o + ray.d * si.t - centre)
             out = primary_aovs(si, field_hit, valid, bsdf, field_bsdf, depth, mi.Float(steps),
-                               known[0] if known else None)
+                               *known)
             if extra:
                 out += [extra[0].x, extra[0].y, extra[0].z]
             return tuple(dr.select(first, v, o) for v, o in zip(out, old))

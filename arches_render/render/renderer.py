@@ -1,9 +1,11 @@
 """From a scene description to pixels: Mitsuba scene assembly and pass-wise rendering.
 
 ``geometry = "field"`` renders with ``implicit_path`` and sphere-traces the field;
-``geometry = "mesh"`` renders the marching-cubes mesh of the same field with
-Mitsuba's built-in ``path`` integrator and the same camera, lights and materials.
-This mesh mode is the cross-check of the sphere tracer. ``geometry = "sdfgrid"``
+``geometry = "mesh"`` renders the marching-cubes mesh of the same field with the
+same camera, lights and materials: with ``implicit_path`` without a field when the
+field's material shades once per vertex (``triplanar``: shaded as on the field,
+its cavity term at camera hits only), else with Mitsuba's built-in ``path``. This
+mesh mode is the cross-check of the sphere tracer. ``geometry = "sdfgrid"``
 (benchmarks only) renders the field sampled on the mesh's voxel grid as
 Mitsuba's own ``sdfgrid`` shape, the yardstick of ``render_field_vs_sdfgrid``. A scene with an
 ``[atmosphere]`` renders with ``implicit_path`` in both modes (Mitsuba's ``path``
@@ -304,7 +306,11 @@ def build_scene(desc, geometry=None, width=None, height=None, voxel=None, progre
     field_bsdf = bsdfs[desc.field_material] if desc.field is not None else None
     atmosphere = getattr(desc, "atmosphere", None)
     if geometry in ("mesh", "sdfgrid") or desc.field is None:
-        ours = aovs or atmosphere is not None
+        # The field's material shades its mesh once per vertex, its cavity term at camera
+        # hits only, as on the field: only implicit_path knows how (Mitsuba's path shades
+        # twice per vertex, the cavity's march included).
+        shades = hasattr(field_bsdf, "shade")
+        ours = aovs or atmosphere is not None or shades
         d["integrator"] = {"type": "implicit_path" if ours else "path", "max_depth": s.max_depth,
                            "rr_depth": s.rr_depth}
         if aovs:
@@ -314,6 +320,8 @@ def build_scene(desc, geometry=None, width=None, height=None, voxel=None, progre
         elif desc.field is not None:
             d["field_mesh"], _ = field_mesh_shape(desc, field_bsdf, voxel, progress)
         scene = mi.load_dict(d)
+        if ours and shades:
+            scene.integrator().attach_material(field_bsdf)
     else:
         d["integrator"] = {"type": "implicit_path", "max_depth": s.max_depth, "rr_depth": s.rr_depth,
                            "eps": s.eps, "omega": s.omega, "max_steps": s.max_steps,
