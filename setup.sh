@@ -3,6 +3,8 @@
 #
 #   bash setup.sh demo [ARGS...]   install, then render scenes/default.toml to out/default.exr + .png
 #   bash setup.sh test [ARGS...]   install with the test extra, then run pytest (ARGS go to pytest)
+#                                  in ARCHES_TEST_WORKERS processes (pytest-xdist; default: the
+#                                  cores, at most 4), a test file per process at a time
 #
 # Installs what is missing and nothing else: the Debian packages libllvm19 (Dr.Jit's LLVM
 # backend needs libLLVM >= 16), python3, python3-venv and python3-pip; a virtualenv in .venv;
@@ -157,6 +159,13 @@ if [[ $mode == demo ]]; then
     mkdir -p out  # render refuses an output folder that does not exist
     exec "$VENV/bin/arches-render" render scenes/default.toml -o out/default.exr "$@"
 else
-    say "python -m pytest -q${*:+ $*}"
-    exec "$VENV/bin/python" -m pytest -q "$@"
+    # Two processes on two cores take ~60 % of one's time: a render keeps the cores busy,
+    # but scene loading, kernel compilation and the checks between renders are serial.
+    # A file per process keeps its module fixtures (the sweep, the goldens) in one place.
+    workers=${ARCHES_TEST_WORKERS:-$(nproc 2>/dev/null || echo 2)}
+    (( workers > 4 )) && workers=4
+    xdist=()
+    (( workers > 1 )) && xdist=(-n "$workers" --dist loadfile)
+    say "python -m pytest -q ${xdist[*]}${*:+ $*}"
+    exec "$VENV/bin/python" -m pytest -q "${xdist[@]}" "$@"
 fi
