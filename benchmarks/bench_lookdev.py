@@ -19,10 +19,20 @@
                         is shaded once per vertex by ``implicit_path`` (issue 33 part 2).
                         Baseline: the goal of ``lookdev_cost_ratio``, 1.3. Extra fields:
                         both times, both integrators, the load.
+``lookdev_parts_default``  what each part of ``scenes/default.toml``'s look costs
+                        (issue 33 part 1): the scene rendered (320x180, 16 spp, warm
+                        kernels, field and mesh) with its look, with one part off at a
+                        time (histogram tiling -> repeat, detail, strata colours, cavity,
+                        atmosphere) and with a plain diffuse material, every variant in
+                        one run. Value: the field render with its look over the plain
+                        one. Baseline: the goal of ``lookdev_cost_ratio``, 1.3. Extra
+                        fields: ``{geometry}_{variant}`` seconds and
+                        ``{geometry}_{variant}_x`` (over the look), the load.
 """
 
 from __future__ import annotations
 
+import copy
 import os
 import subprocess
 import sys
@@ -126,8 +136,49 @@ def bench_lookdev_default_mesh_ratio(repeat):
                 load=round(0.5 * (load0 + os.getloadavg()[0]), 2))
 
 
+def _without(doc: dict, material: str, **keys) -> dict:
+    """``doc`` with keys of one material set (``None``: removed)."""
+    doc = copy.deepcopy(doc)
+    mat = doc["materials"][material]
+    for key, value in keys.items():
+        if value is None:
+            mat.pop(key, None)
+        else:
+            mat[key] = value
+    return doc
+
+
+def look_variants(doc: dict, material: str) -> dict:
+    """``{variant: document}``: the look, each part off in turn, and a plain diffuse material."""
+    return {"look": doc,
+            "repeat_tiling": _without(doc, material, tiling="repeat"),
+            "no_detail": _without(doc, material, detail=False),
+            "no_strata": _without(doc, material, strata=None),
+            "no_cavity": _without(doc, material, cavity=None),
+            "no_atmosphere": {k: v for k, v in doc.items() if k != "atmosphere"},
+            "plain": diffuse_document(doc)}
+
+
+def bench_lookdev_parts_default(repeat):
+    w, h, spp = 320, 180, 16
+    load0 = os.getloadavg()[0]
+    doc = tomlfile.load(DEFAULT)
+    variants = look_variants(doc, doc["field"]["material"])
+    out = {}
+    for geometry in ("field", "mesh"):
+        scenes = [build_scene(parse_plain(d, DEFAULT), geometry, w, h) for d in variants.values()]
+        times = dict(zip(variants, median_renders(scenes, spp, repeat)))
+        for name, t in times.items():
+            out[f"{geometry}_{name}"] = round(t, 3)
+            out[f"{geometry}_{name}_x"] = round(t / times["look"], 3)
+    return dict(value=out["field_look"] / out["field_plain"], unit="x", baseline=1.3, baseline_is="goal", **out,
+                scene=str(DEFAULT.relative_to(REPO)), resolution=f"{w}x{h}", spp=spp,
+                load=round(0.5 * (load0 + os.getloadavg()[0]), 2))
+
+
 BENCHMARKS = {
     "lookdev_gallery_s": (bench_lookdev_gallery_s, 1),
     "lookdev_cost_ratio": (bench_lookdev_cost_ratio, 3),
     "lookdev_default_mesh_ratio": (bench_lookdev_default_mesh_ratio, 3),
+    "lookdev_parts_default": (bench_lookdev_parts_default, 3),
 }

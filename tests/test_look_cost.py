@@ -322,3 +322,25 @@ def test_shading_once_on_a_triplanar_mesh_matches_stock_path():
     res = welch_compare(ref, ours, geometry=False)
     assert res.passed, res.summary() + "\n" + "\n".join(res.failures)
     assert power_check(ref, ours) == [], "too few samples to tell a 1 % shift or a 25 % patch"
+
+
+def test_the_look_parts_benchmark_turns_off_what_it_names(monkeypatch):
+    """``lookdev_parts_default``'s variants of the default scene each lose exactly their part."""
+    from helpers import REPO
+    monkeypatch.syspath_prepend(str(REPO / "benchmarks"))
+    import bench_lookdev as B
+    doc = tomlfile.load(B.DEFAULT)
+    material = doc["field"]["material"]
+    descs = {name: B.parse_plain(d, B.DEFAULT) for name, d in B.look_variants(doc, material).items()}
+    look = descs["look"]
+    props = {name: d.materials[material] for name, d in descs.items()}
+    assert look.atmosphere is not None and descs["no_atmosphere"].atmosphere is None
+    assert props["look"]["type"] == "triplanar" and props["plain"]["type"] == "diffuse"
+    tilings = {name: {v for k, v in p.items() if k.endswith("_tiling")} for name, p in props.items()}
+    assert "histogram" in tilings["look"] and tilings["repeat_tiling"] == {"repeat"}, tilings
+    assert props["look"]["detail_octaves"] > 0 and props["no_detail"]["detail_octaves"] == 0
+    changed = {name: sorted(k for k in set(p) | set(props["look"]) if p.get(k) != props["look"].get(k))
+               for name, p in props.items() if name not in ("look", "plain")}
+    assert changed["no_atmosphere"] == [] and all(changed[n] for n in ("repeat_tiling", "no_detail", "no_strata",
+                                                                          "no_cavity")), changed
+    assert not any("strata" in k for k in changed["no_cavity"] + changed["no_detail"]), changed
