@@ -81,6 +81,7 @@ def test_mip_levels_are_the_box_filtered_means_of_the_texture(shape):
         want = arr[:hh * k, :ww * k].astype(np.float64).reshape(hh, k, ww, k, c).mean(axis=(1, 3))
         got = tex.level_array(level)
         assert got.shape == want.shape and got.dtype == np.float32
+        # 1e-6: the pyramid is stored in float32 (texels in [0, 1]: ~1e-7 rounding per level).
         assert np.allclose(got, want, atol=1e-6), level
     if h == w and h & (h - 1) == 0:  # a square power of two: the last level is the mean
         assert np.allclose(tex.level_array(tex.count - 1).reshape(-1), arr.mean(axis=(0, 1)), atol=1e-6)
@@ -180,6 +181,7 @@ def test_projection_slots_rank_weights_and_keep_each_axis_uv():
         want = np.stack([axis_uv[a][i] for i, a in enumerate(axis)])
         # Tied weights: either tied axis may take the slot, but the axes stay distinct.
         tied = (bw == ws[:, k:k + 1]).sum(axis=1) > 1
+        # 1e-4: positions up to ~100 m pass through float32 (ulp ~8e-6); the test is which axis, not rounding.
         assert np.allclose(uv[~tied], want[~tied], atol=1e-4)
 
 
@@ -244,6 +246,7 @@ def test_skipping_zero_weight_layers_matches_evaluating_every_layer():
         want = mi.Color3f(0.0)
         for i in range(len(layers)):
             want += dr.clip(bsdf.tint[i] * bsdf._texel(i, slots, fp, xi), 0.0, 1.0) * w[i]
+        # 1e-6: float32 sums of the same terms, in another order inside the branches.
         assert np.allclose(_np(albedo), _np(want), atol=1e-6)
         # Roughness 0: Lambert, so the Oren-Nayar terms are the albedo and zero.
         assert np.allclose(_np(ca), _np(want), atol=1e-6) and np.abs(_np(cb)).max() == 0.0
