@@ -28,9 +28,25 @@ chain-rule bound, ``M2`` being sqrt(2)-Lipschitz) and every point of the cell is
 within 0.0135 of the grid, so ``|n| <= 1.036 + 12 * 0.0135 < 1.2``
 (NOISE_RANGE; sampling finds 0.92).
 
+Curvature along a line (proved by hand; used by second-order line bounds). On a
+line ``u(s) = u0 + s e``, ``|e| = 1``, ``n'' = sum_c W_c'' phi_c + 2 W_c' (g_c . e)`` with
+``phi_c = g_c . (u - c)`` (linear, so ``phi_c'' = 0``). Per corner ``|phi_c| <= M2(u - c) <= 2``
+and ``|g_c . e| <= M2(e)``; the fade's ``s' = 30 t^2 (t - 1)^2 <= 15/8`` and
+``|s''| = 60 |t (2t - 1)(t - 1)| <= 10 / sqrt(3)``; summing the weights' derivatives over
+the corners (the factors of the other axes sum to 1),
+``sum_c |W_c'| <= 2 s'_max |e|_1`` and
+``sum_c |W_c''| <= 2 s''_max + 4 s'_max^2 (|e|_1^2 - 1)``. Hence
+
+    |n''| <= 2 (2 s''_max + 4 s'_max^2 (|e|_1^2 - 1)) + 4 s'_max M2(e) |e|_1,
+
+which is 66.22 for directions in a coordinate plane (``|e|_1^2 <= 2``, ``M2(e) <= sqrt 2``:
+NOISE_PLANAR_CURVATURE, what a heightfield's fBm at ``(x, y, const)`` sees) and 97.72
+for any direction. Crude (the triangle inequality over corners), but proved.
+
 fBm sums octaves ``k = 0..K-1`` of ``gain^k n(lacunarity^k p)`` with per-octave
-seeds, so ``L = NOISE_LIPSCHITZ sum_k (gain lacunarity)^k`` and
-``|fbm| <= NOISE_RANGE sum_k gain^k``.
+seeds, so ``L = NOISE_LIPSCHITZ sum_k (gain lacunarity)^k``,
+``|fbm| <= NOISE_RANGE sum_k gain^k`` and, along a line,
+``|fbm''| <= C sum_k (gain lacunarity^2)^k`` (:func:`fbm_curvature`).
 
 References
 ----------
@@ -49,6 +65,9 @@ import mitsuba as mi
 # e.g. the cube at u = (1/2,1/2,1/2): 3.6927 / 0.98425 + 0.0049 = 3.7567; lower bound 15/4 = 3.75.
 NOISE_LIPSCHITZ = 3.76
 NOISE_RANGE = 1.2
+# Module docstring, "Curvature along a line": 66.219 rounded up (directions in a
+# coordinate plane).
+NOISE_PLANAR_CURVATURE = 66.23
 
 
 def corner_hash(hx, hy, hz):
@@ -203,6 +222,53 @@ def fbm(p, octaves: int, lacunarity, gain, seed, level=None):
         q = q * lacunarity
         amp = amp * gain
     return total
+
+
+def fbm_gradient(p, octaves: int, lacunarity, gain, seed, level=None):
+    """:func:`fbm` and its gradient with the octaves' weights held fixed, in one pass.
+
+    Bitwise the value of :func:`fbm` (the same operations in the same order, see
+    :func:`gradient_noise_grad`). With a ``level`` the gradient is that of
+    ``sum_k w_k gain^k n(lacunarity^k p)`` for the weights ``w_k`` *at p*: the fade of
+    the weights along a ray is the caller's to bound
+    (:mod:`arches_render.field.lod`).
+
+    Returns
+    -------
+    (mi.Float, mi.Vector3f)
+        The value and its gradient with respect to ``p`` (units of the base
+        wavelength).
+    """
+    total, grad = mi.Float(0.0), mi.Vector3f(0.0)
+    amp, freq = mi.Float(1.0), mi.Float(1.0)
+    q = mi.Point3f(p)
+    for k in range(int(octaves)):
+        if level is None:
+            v, g = gradient_noise_grad(q + 17.31 * k, seed + k)
+            total += amp * v
+            grad += (amp * freq) * g
+        else:
+            w = dr.clip(level - k, 0.0, 1.0)
+
+            def octave(total, grad, amp, freq, q, w, seed, k=k):
+                v, g = gradient_noise_grad(q + 17.31 * k, seed + k)
+                return total + w * (amp * v), grad + (w * (amp * freq)) * g
+
+            total, grad = dr.if_stmt((total, grad, amp, freq, q, w, seed), w > 0.0, octave,
+                                     lambda total, grad, amp, freq, q, w, seed: (total, grad),
+                                     label="fbm_gradient_octave")
+        q = q * lacunarity
+        amp = amp * gain
+        freq = freq * lacunarity
+    return total, grad
+
+
+def fbm_curvature(octaves: int, lacunarity: float, gain: float) -> list[float]:
+    """Bounds of ``|d^2/ds^2 fbm(u0 + s e)|`` for unit ``e`` in a coordinate plane (units of
+    the base wavelength), for the first ``n = 0..octaves`` octaves:
+    ``NOISE_PLANAR_CURVATURE sum_{k<n} (gain lacunarity^2)^k`` (module docstring)."""
+    terms = [NOISE_PLANAR_CURVATURE * (gain * lacunarity ** 2) ** k for k in range(int(octaves))]
+    return [sum(terms[:n]) for n in range(int(octaves) + 1)]
 
 
 def fbm_lipschitz(octaves: int, lacunarity: float, gain: float) -> float:

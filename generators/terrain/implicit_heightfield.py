@@ -94,8 +94,9 @@ from arches_render.field import Heightfield
 from arches_render.field.heightfield import height_grid
 from arches_render.field.lod import OctaveLOD
 from arches_render.field.node import box_distance, box_gap, box_reach, clip_index, opaque_float
-from arches_render.field.noise import fbm, fbm_lipschitz, fbm_range
+from arches_render.field.noise import fbm, fbm_gradient, fbm_lipschitz, fbm_range
 
+from .elevation_line import ElevationLineBound
 from .falloff import G_SLOPE, falloff_slope_max, g_dr, sigmoid_coefficients, sigmoid_dr, sigmoid_slope
 from .skeletal_set import SkeletalSet
 
@@ -201,13 +202,20 @@ class ImplicitHeightfield(Heightfield):
         self._inv_S = opaque_float(1.0 / sigmoid_slope(R, T))
         self._extra = opaque_float(extra_hi)
         self._inv_Lh = opaque_float(1.0 / math.sqrt(1.0 + self.slope_bound ** 2))
+        self._line = ElevationLineBound(self)
 
     # -- elevation ------------------------------------------------------------------
-    def elevation(self, x, y, level=None):
+    def elevation(self, x, y, level=None, along=None):
         """``h(x, y)`` (``mi.Float`` each): grid + elevation primitives + fBm (``level``:
         the fBm's footprint level, :class:`~arches_render.field.lod.OctaveLOD`; None:
-        every octave)."""
+        every octave).
+
+        With ``along`` (a direction, ``mi.Vector3f``): ``(h, a0)``, ``a0`` the faded fBm's
+        derivative along it with the octave weights held (``A0`` of
+        :mod:`.elevation_line`; ``None`` without amplification). ``h`` is bitwise the
+        same."""
         h = self.height(x, y)
+        a0 = None
         if self.bumps is not None:
             h = h + self.bumps.field(mi.Point3f(x, y, 0.0))
         if self.amp is not None:
@@ -218,8 +226,14 @@ class ImplicitHeightfield(Heightfield):
                 u = dr.clip((e - self._amp_border) * self._amp_inv_taper, 0.0, 1.0)
                 a = a * (u * u * (3.0 - 2.0 * u))
             lvl = () if level is None else (level,)
-            h = h + a * fbm(q, int(self.amp["octaves"]), self._amp_lac, self._amp_gain, self._amp_seed, *lvl)
-        return h
+            args = (q, int(self.amp["octaves"]), self._amp_lac, self._amp_gain, self._amp_seed, *lvl)
+            if along is None:
+                h = h + a * fbm(*args)
+            else:
+                n, gn = fbm_gradient(*args)
+                h = h + a * n
+                a0 = (a * self._amp_inv_wl) * (gn.x * along.x + gn.y * along.y)
+        return h if along is None else (h, a0)
 
     def elevation_np(self, x, y) -> np.ndarray:
         """``h`` on numpy coordinates (same code as the renderer's, through Dr.Jit)."""
@@ -271,7 +285,11 @@ class ImplicitHeightfield(Heightfield):
         slopes grown by ``1 + kappa s``)."""
         level = self._lod.level(footprint) if self.amp is not None else None
         grow = 1.0 + self.lod_kappa * footprint.rate if level is not None else 1.0
-        v = self.elevation(p.x, p.y, level) - p.z
+        if direction is None:
+            v = self.elevation(p.x, p.y, level) - p.z
+        else:
+            h, a0 = self.elevation(p.x, p.y, level, along=direction)
+            v = h - p.z
         fP, dP = self._prism(p)
         f = dr.minimum(sigmoid_dr(v, self._R, self._a, self._b), fP)
         u = clip_index((p.x - self._x0) * self._inv_dx, 0.0, self.nx - 1.0)
@@ -281,13 +299,18 @@ class ImplicitHeightfield(Heightfield):
         if direction is not None:
             inv_run = dr.rcp(dr.maximum(dr.sqrt(dr.square(direction.x) + dr.square(direction.y)), 1e-7))
             inv_drop = dr.rcp(dr.maximum(dr.abs(direction.z), 1e-7))
+        # f_T >= -c  =>  v >= -c / k (0 <= c < T); nothing to bound when c >= T.
+        # Below the surface (c < 0, asked by the sum's caps) s(v) >= -c > 0 only
+        # gives v >= -c / S_SIGMA.
+        shifts = [c * dr.select(mi.Bool(c >= 0.0), self._inv_k, self._inv_S) for c in levels]
+        if direction is not None and levels:
+            # Along the ray: second-order bounds of v on the ray's own line.
+            lines = self._line.free_lengths(p, direction, v, k, shifts, a0, level, footprint)
         ds = []
-        for c in levels:
-            # f_T >= -c  =>  v >= -c / k (0 <= c < T); nothing to bound when c >= T.
-            # Below the surface (c < 0, asked by the sum's caps) s(v) >= -c > 0 only
-            # gives v >= -c / S_SIGMA.
-            shift = c * dr.select(mi.Bool(c >= 0.0), self._inv_k, self._inv_S)
+        for i, (c, shift) in enumerate(zip(levels, shifts)):
             dT = dr.maximum(-v - shift, 0.0) * self._inv_Lh * (1.0 / grow)
+            if direction is not None:
+                dT = dr.maximum(dT, lines[i])
             for clearance, radius in zip(above, self._radii):
                 if direction is None:
                     reach = dr.minimum(radius, clearance - shift)

@@ -1,0 +1,230 @@
+"""Second-order free lengths along a ray above an implicit heightfield's elevation.
+
+Why. A ray that leaves the ground (a shadow or bounce ray, a camera ray grazing a
+slope) sees ``v = h(x, y) - z`` grow at the rate it climbs, ``sin`` of its angle to
+the ground, often a few tenths. Hart's bound ``-v / L_h`` divides by the slope bound of
+the whole elevation, grid plus fBm (``L_h ~ 4`` on an amplified canyon), so every step
+grows the clearance by a few per cent and a ray crawls for a hundred steps before
+it is a metre off the ground. Here the bound follows what the elevation does along
+*this* line, from its derivative at the point and how fast that derivative can
+change, so a ray that climbs away steps in proportion to how fast it climbs.
+
+The bound. On the line ``p + s u`` (``|u| = 1``, horizontal part ``u_xy``) let
+``g(s) = h(p_xy + s u_xy) - p_z - s u_z``, so ``g(0) = v``. With
+``h = H + B + w_t a F`` (bilinear grid, elevation primitives, the fBm ``F`` faded by the
+taper ``w_t`` towards the tile's border; :mod:`.implicit_heightfield`), for ``|s| <= rho``:
+
+* grid: ``H' = grad H . u_xy`` lies in ``u_x [Hx_lo, Hx_hi] + u_y [Hy_lo, Hy_hi]``, the
+  range of the bilinear patches' partial derivatives over the 3x3 cells around
+  ``p``'s (a patch's ``dH/dx`` is a convex combination of its two row differences);
+  the 3x3 cells hold the horizontal disc of one cell edge, so
+  ``rho <= cell / |u_xy|``; cells on the grid's border widen their range to 0, the
+  derivative of the clamped lookup outside;
+* elevation primitives: ``|B'| <= L_B |u_xy|`` (their slope bound);
+* fBm: ``(w_t a F)' = w_t' a F + w_t (Phi + Fw)``, with ``Fw = sum_k w_k o_k'`` (octave
+  weights ``w_k`` of the footprint, :mod:`arches_render.field.lod`) and ``Phi = sum_k
+  w_k' o_k`` the fade of the weights. At ``s = 0`` the code evaluates
+  ``A0 = w_t(0) Fw(0)`` exactly (:func:`~arches_render.field.noise.fbm_gradient`).
+  Then ``|w_t' a F| <= 1.5 |u_xy| N_a / taper`` (``N_a`` the fBm's range in metres;
+  0 where the horizontal disc of the ball misses the fade band, ``w_t`` constant there),
+  ``|Phi| <= r Q_n`` (the fade's slope, ``r`` the cone's rate), and
+
+      |w_t(s) Fw(s) - A0| <= |s| (1.5 |u_xy| / taper) S_n |u_xy| + |Fw(s) - Fw(0)|,
+      |Fw(s) - Fw(0)| <= |s| (a C_n |u_xy|^2 / lambda^2 + S_n |u_xy| r l / (fp ln l)),
+
+  ``S_n`` the slope bound of the first ``n`` octaves (all that can act within
+  ``rho_lod = fp (1 - 1/l) / r``, where the footprint stays above ``fp / l``: so the
+  level moves by at most ``r |s| l / (fp ln l)``, bounding the weights' change) and
+  ``C_n`` their curvature bound along a horizontal line
+  (:func:`~arches_render.field.noise.fbm_curvature`). So ``rho <= rho_lod``.
+
+Together ``g'(s)`` lies in ``[D_lo - K |s|, D_hi + K |s|]`` (the exact derivative at
+``p``, widened by the first-order slack ``m0``, and the growth ``K`` above) and in the
+first-order range ``[E_lo, E_hi]`` (the grid's range plus the extras' slope bounds).
+Both sides of the line are then bounded by ``|g(s) - v| <= G(|s|)`` with
+
+    G(s) = int_0^s min(B0 + K x, B1) dx,   B0 = max(D_hi, -D_lo),  B1 = max(E_hi, -E_lo),
+
+and ``g < -c'`` on ``|s| < min(rho, G^-1(-v - c'))``: a two-sided free length, as the
+over-relaxed march needs (:mod:`arches_render.render.march`). ``G^-1`` is the root
+of a quadratic while ``B0 + K s < B1`` and linear after.
+
+References
+----------
+Hart, J. C. (1996). Sphere tracing. The Visual Computer 12(10).
+Galin, E., Guérin, E., Paris, A., Peytavie, A. (2020). Segment tracing using local
+Lipschitz bounds. Computer Graphics Forum 39(2) (bounds along the ray's own segment
+instead of a ball).
+"""
+
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from arches_render.field.lod import LOD_FACTOR
+from arches_render.field.noise import NOISE_LIPSCHITZ, NOISE_RANGE, fbm_curvature
+
+#: ``max |d/du smoothstep(u)|``: the taper weight is ``1.5 / taper``-Lipschitz.
+TAPER_SLOPE = 1.5
+
+
+def grid_derivative_ranges(H: np.ndarray, dx: float, dy: float) -> list[np.ndarray]:
+    """``(Hx_lo, Hx_hi, Hy_lo, Hy_hi)`` per sample ``(j, i)``: the range of the bilinear
+    interpolant's partial derivatives over the 3x3 cells around cell ``(j, i)``
+    (module docstring; cells on the border include 0), flattened like the heights
+    (the last row and column repeat the ones before, as the cell lookup clamps).
+
+    Parameters
+    ----------
+    H : numpy.ndarray
+        ``(ny, nx)`` elevations.
+    dx, dy : float
+        Sample spacing.
+
+    Returns
+    -------
+    list of numpy.ndarray
+        Four float32 arrays of ``ny * nx``, rounded outwards.
+    """
+    from scipy.ndimage import maximum_filter, minimum_filter
+    H = np.asarray(H, dtype=np.float64)
+    rows = (np.diff(H[:-1], axis=1) / dx, np.diff(H[1:], axis=1) / dx)      # dH/dx, bottom and top
+    cols = (np.diff(H[:, :-1], axis=0) / dy, np.diff(H[:, 1:], axis=0) / dy)  # dH/dy, left and right
+    out = []
+    for a, b in (rows, cols):
+        lo = minimum_filter(np.minimum(a, b), size=3, mode="nearest")
+        hi = maximum_filter(np.maximum(a, b), size=3, mode="nearest")
+        for arr, op in ((lo, np.minimum), (hi, np.maximum)):
+            for sl in ((0, slice(None)), (-1, slice(None)), (slice(None), 0), (slice(None), -1)):
+                arr[sl] = op(arr[sl], 0.0)
+            full = np.zeros_like(H)
+            full[:-1, :-1] = arr
+            full[-1, :-1], full[:, -1] = full[-2, :-1], full[:, -2]
+            # float32 storage must not narrow the range.
+            f32 = full.astype(np.float32)
+            f32 = np.where(f32 < full, np.nextafter(f32, np.float32(np.inf)), f32) if op is np.maximum else \
+                np.where(f32 > full, np.nextafter(f32, np.float32(-np.inf)), f32)
+            out.append(f32.ravel())
+    return out
+
+
+class ElevationLineBound:
+    """Free lengths along lines above an implicit heightfield (module docstring).
+
+    Parameters
+    ----------
+    hf : ImplicitHeightfield
+        The terrain; its grid, elevation primitives and amplification are read once.
+    """
+
+    def __init__(self, hf):
+        self.cell = float(min(hf.dx, hf.dy))
+        self._ranges = [mi.Float(a) for a in grid_derivative_ranges(hf.heights_np, hf.dx, hf.dy)]
+        self.bump_slope = float(hf.bumps.lipschitz) if hf.bumps is not None else 0.0
+        amp = hf.amp
+        self.amp = amp
+        if amp is None:
+            return
+        a, lam = abs(float(amp["amplitude"])), float(amp["wavelength"])
+        lac, gain, octaves = float(amp["lacunarity"]), float(amp["gain"]), int(amp["octaves"])
+        gl = gain * lac
+        powers = [gl ** k for k in range(octaves)]
+        #: Per n = 0..octaves: slope S_n, fade slope per unit rate Q_n, curvature C_n (metres).
+        self._S = [a * NOISE_LIPSCHITZ / lam * sum(powers[:n]) for n in range(octaves + 1)]
+        log_l = math.log(lac) if lac > 1.0 else 1.0
+        self._Q = [a * NOISE_RANGE * LOD_FACTOR * lac / (lam * log_l) * max(powers[:n], default=0.0)
+                   for n in range(octaves + 1)]
+        self._C = [a / lam ** 2 * c for c in fbm_curvature(octaves, lac, gain)]
+        self.range_m = a * NOISE_RANGE * sum(gain ** k for k in range(octaves))
+        self.inv_taper = 1.0 / amp["taper"] if amp["taper"] > 0 else 0.0
+        # The fade band, grown by the ball's reach: elsewhere w_t is constant.
+        x0, y0, x1, y1 = hf.extent
+        self.sides = tuple(float(v) for v in (x0, y0, x1, y1))
+        self.band = (float(amp["border"]) - self.cell, float(amp["border"] + amp["taper"]) + self.cell)
+        self.lac_over_log = lac / log_l
+        self.shrink = 1.0 - 1.0 / lac if lac > 1.0 else 0.0
+
+    @staticmethod
+    def _table(values, n):
+        out = mi.Float(values[0])
+        for i, v in enumerate(values[1:], 1):
+            out = dr.select(n >= i, v, out)
+        return out
+
+    def free_lengths(self, p, u, v, k, shifts, a0, level, footprint):
+        """Two-sided free lengths of the line through the point with ``v = h - z`` along
+        ``u``, to each level ``{v >= -shift}``.
+
+        Parameters
+        ----------
+        p : mi.Point3f
+            The point.
+        u : mi.Vector3f
+            Unit direction of the line.
+        v : mi.Float
+            ``h(p_xy) - p_z`` (the footprint field's, with a footprint).
+        k : mi.UInt32
+            ``p``'s cell (sample index of its lower-left corner).
+        shifts : sequence of mi.Float or float
+            The levels, as clearances of ``v``.
+        a0 : mi.Float or None
+            The fBm's exact derivative along ``u`` at ``p`` with the octave weights
+            held (``A0`` of the module docstring); ``None`` without amplification.
+        level : mi.Float or None
+            The fBm's footprint level at ``p`` (``None``: every octave), and
+        footprint : Footprint or None
+            the ray's cone there.
+
+        Returns
+        -------
+        list of mi.Float
+        """
+        run = dr.sqrt(dr.square(u.x) + dr.square(u.y))
+        xlo, xhi, ylo, yhi = (dr.gather(mi.Float, r, k) for r in self._ranges)
+        h_lo = dr.minimum(u.x * xlo, u.x * xhi) + dr.minimum(u.y * ylo, u.y * yhi)
+        h_hi = dr.maximum(u.x * xlo, u.x * xhi) + dr.maximum(u.y * ylo, u.y * yhi)
+        rho = self.cell * dr.rcp(dr.maximum(run, 1e-7))
+        slack = self.bump_slope * run          # first order, in both ranges
+        first = mi.Float(slack)                # first-order range of the extras
+        K = mi.Float(0.0)
+        centre = -u.z
+        if self.amp is not None:
+            n = mi.Float(len(self._S) - 1)
+            rate = mi.Float(0.0)
+            if level is not None:
+                n = dr.clip(dr.ceil(level + 1.0), 0.0, float(len(self._S) - 1))
+                rate = footprint.rate
+                rho = dr.minimum(rho, dr.select(rate > 0.0, footprint.radius * self.shrink * dr.rcp(rate), dr.inf))
+            S, Q, C = (self._table(t, n) for t in (self._S, self._Q, self._C))
+            fade = rate * Q
+            taper = TAPER_SLOPE * self.inv_taper * run
+            if self.inv_taper:
+                x0, y0, x1, y1 = self.sides
+                edge = dr.minimum(dr.minimum(p.x - x0, x1 - p.x), dr.minimum(p.y - y0, y1 - p.y))
+                taper = dr.select((edge > self.band[0]) & (edge < self.band[1]), taper, 0.0)
+            slack = slack + taper * self.range_m + fade
+            first = first + S * run + taper * self.range_m + fade
+            K = C * dr.square(run) + taper * S * run
+            if level is not None:
+                K = K + S * run * rate * self.lac_over_log * dr.rcp(dr.maximum(footprint.radius, 1e-30))
+            centre = centre + a0
+        B0 = dr.maximum(h_hi + centre + slack, -(h_lo + centre - slack))
+        B1 = dr.maximum(h_hi - u.z + first, -(h_lo - u.z - first))
+        B0 = dr.minimum(B0, B1)
+        K = dr.maximum(K, 1e-30)
+        s1 = (B1 - B0) * dr.rcp(K)
+        G1 = s1 * (B0 + 0.5 * K * s1)
+        out = []
+        for shift in shifts:
+            gap = dr.maximum(-v - shift, 0.0)
+            quad = 2.0 * gap * dr.rcp(B0 + dr.sqrt(dr.square(B0) + 2.0 * K * gap))
+            lin = s1 + (gap - G1) * dr.rcp(dr.maximum(B1, 1e-30))
+            d = dr.select(gap <= G1, quad, lin)
+            # (A NaN proves nothing: keep it, the march treats it as such.)
+            out.append(dr.minimum(d, rho))
+        return out
+
