@@ -98,10 +98,51 @@ def test_memory_follows_the_occupied_bricks_not_the_volume(transform):
     assert np.median(bound) > 0.5 * np.median(distance), (np.median(bound), np.median(distance))
 
 
-def test_values_are_bitwise_those_of_the_same_set_in_another_order():
-    """The grid sorts capsules by cell for locality: the field must not depend on the
-    order the caller gave them in."""
+def _stored_capsules(node, a, b, r):
+    """Indices into ``a, b, r`` of the capsules in the order the grid stores them (from its
+    float32 records)."""
+    from arches_render.field.primitive_set import CAPSULE_RECORD
+    records = np.asarray(node._records, dtype=np.float32).reshape(-1, CAPSULE_RECORD)[:, :7]
+    of_row = {row.tobytes(): i for i, row in enumerate(np.concatenate([a, b, r[:, None]], axis=1)
+                                                       .astype(np.float32))}
+    assert len(of_row) == len(a)  # distinct random capsules: a record names its capsule
+    return np.array([of_row[row.tobytes()] for row in records])
+
+
+def test_grid_is_the_same_for_the_same_set_in_another_order():
+    """The grid sorts capsules by cell for locality: what it stores and what the field is must
+    not depend on the order the caller gave them in. The values alone cannot show it (a max
+    over a list is order-independent whatever the list holds); the stored set can:
+
+    * the same stored bricks and cells, and lists of the same lengths (bitwise);
+    * every cell's list names the same capsules;
+    * the capsules are stored grouped by brick and, within a brick, by the cell of their box's
+      centre (the locality the sort is for), in the same sequence of cells for both orders
+      (capsules whose centres share a cell may come in either order);
+    * and the field's values are bitwise equal."""
     a, b, r = _capsules(800, 6)
     perm = np.random.default_rng(7).permutation(len(a))
+    one, two = F.CapsuleSet(a, b, r), F.CapsuleSet(a[perm], b[perm], r[perm])
+    assert np.array_equal(one.grid.slots_np, two.grid.slots_np)
+    assert np.array_equal(one.grid.offset_np, two.grid.offset_np)
+    # Stored position -> capsule, as indices into (a, b, r) for both.
+    ids_one, ids_two = _stored_capsules(one, a, b, r), perm[_stored_capsules(two, a[perm], b[perm], r[perm])]
+    assert sorted(ids_one) == sorted(ids_two) == list(range(len(a)))
+    # Each cell's list, as sorted capsule indices per cell (the offsets are the same).
+    offset = one.grid.offset_np.astype(np.int64)
+    owner = np.repeat(np.arange(len(offset) - 1), np.diff(offset))
+    lists = [ids[grid.grid.index_np.astype(np.int64)] for ids, grid in ((ids_one, one), (ids_two, two))]
+    lists = [lst[np.lexsort((lst, owner))] for lst in lists]
+    assert np.array_equal(lists[0], lists[1]), "a cell lists other capsules in the other order"
+    # Locality: the cell and brick of each capsule's box centre, in storage order.
+    lo, hi = np.minimum(a, b) - r[:, None], np.maximum(a, b) + r[:, None]
+    cell = np.clip(np.floor((0.5 * (lo + hi) - one.grid_lo) / one.cell).astype(np.int64), 0, one.res - 1)
+    cell_id = (cell[:, 2] * one.res[1] + cell[:, 1]) * one.res[0] + cell[:, 0]
+    brick = cell // brick_grid.BRICK
+    brick_id = (brick[:, 2] * one.res[1] + brick[:, 1]) * one.res[0] + brick[:, 0]
+    for ids in (ids_one, ids_two):
+        for label in (brick_id[ids], cell_id[ids]):  # each group contiguous: one run per value
+            assert np.count_nonzero(np.diff(label)) == len(np.unique(label)) - 1, "capsules not grouped by cell"
+    assert np.array_equal(cell_id[ids_one], cell_id[ids_two]), "the cells come in another sequence"
     p = np.random.default_rng(8).uniform([-100, -100, -10], [100, 100, 10], (5000, 3))
-    assert np.array_equal(evaluate(F.CapsuleSet(a, b, r), p), evaluate(F.CapsuleSet(a[perm], b[perm], r[perm]), p))
+    assert np.array_equal(evaluate(one, p), evaluate(two, p))

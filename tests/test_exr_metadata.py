@@ -2,6 +2,11 @@
 ``worldToNDC``, screen window and clip planes, as OpenImageIO reads them, and the
 ``position`` and ``depth`` AOVs agree with them (arches_render.render.output).
 
+Only the first test needs OpenImageIO (it is skipped without it): it reads the typed
+attributes as a compositor would and checks that they are the ones the OpenEXR bindings
+(the project's own reader's library, a dependency) read. The geometric checks read the
+matrices through those bindings, so they run wherever the project does.
+
 The geometric check: each pixel's ``position`` (the mean world point of its primary
 hits) pushed through ``worldToNDC`` (row vector times matrix, then the divide by
 ``w``) lands on that pixel's centre ``((i + 1/2) / W, (j + 1/2) / H)`` in NDC, ``y``
@@ -28,8 +33,6 @@ variant()
 from arches_render.cli import main  # noqa: E402
 from arches_render.imaging.exr import read_exr  # noqa: E402
 from arches_render.render.turntable import FIRST_FRAME  # noqa: E402
-
-oiio = pytest.importorskip("OpenImageIO")
 
 W, H, SPP = 64, 36, 16
 
@@ -79,6 +82,7 @@ def slab(tmp_path_factory):
 
 def oiio_attributes(path) -> dict:
     """The attributes OpenImageIO reads from an EXR: ``{name: (type name, value)}``."""
+    oiio = pytest.importorskip("OpenImageIO")
     inp = oiio.ImageInput.open(str(path))
     assert inp is not None, oiio.geterror()
     try:
@@ -87,11 +91,20 @@ def oiio_attributes(path) -> dict:
         inp.close()
 
 
-def matrix(attrs, name) -> np.ndarray:
-    """An M44f attribute as Imath stores it (row-vector layout), float64."""
-    kind, value = attrs[name]
-    assert kind == "matrix", f"{name} is read as {kind}, not a matrix"
-    return np.asarray(value, np.float64).reshape(4, 4)
+def exr_attributes(path) -> dict:
+    """The typed header attributes as the OpenEXR bindings read them (the library behind
+    :func:`~arches_render.imaging.exr.read_exr`): ``{name: value}``, an M44f as a float32
+    ``(4, 4)`` array, a V2f as a ``(2,)`` array, a float as a float."""
+    import OpenEXR
+    return dict(OpenEXR.File(str(path)).header())
+
+
+def matrix(path, name) -> np.ndarray:
+    """An M44f attribute of the EXR at ``path`` as Imath stores it (row-vector layout), float64."""
+    value = exr_attributes(path)[name]
+    assert isinstance(value, np.ndarray) and value.shape == (4, 4) and value.dtype == np.float32, \
+        f"{name} is read as {type(value).__name__} {np.shape(value)}, not an M44f"
+    return value.astype(np.float64)
 
 
 def project(points, m) -> np.ndarray:
@@ -123,6 +136,10 @@ def test_oiio_reads_the_standard_camera_attributes(slab):
     attrs = oiio_attributes(out)
     for name in CAMERA_ATTRS:
         assert name in attrs, f"{name} missing; OIIO reads {sorted(attrs)}"
+    # The matrices OpenImageIO reads are those the geometric tests below check.
+    for name in ("worldToCamera", "worldToNDC"):
+        assert attrs[name][0] == "matrix", f"{name} is read as {attrs[name][0]}, not a matrix"
+        assert np.array_equal(np.asarray(attrs[name][1], np.float64).reshape(4, 4), matrix(out, name)), name
     assert attrs["screenWindowCenter"][0] == "float2" and np.allclose(attrs["screenWindowCenter"][1], 0.0)
     assert attrs["screenWindowWidth"][0] == "float"
     assert attrs["screenWindowWidth"][1] == pytest.approx(2 * math.tan(math.radians(50.0) / 2), rel=1e-6)
@@ -143,7 +160,7 @@ def test_oiio_reads_the_standard_camera_attributes(slab):
 def test_position_projects_to_its_pixel_centre(slab):
     _, out = slab
     img = read_exr(out)
-    m = matrix(oiio_attributes(out), "worldToNDC")
+    m = matrix(out, "worldToNDC")
     ok = single_surface_pixels(img)
     assert ok.sum() > 0.8 * W * H  # the slab fills the frame: most pixels qualify
     ndc = project(img.layers["position"].astype(np.float64), m)
@@ -159,7 +176,7 @@ def test_position_projects_to_its_pixel_centre(slab):
 def test_depth_is_distance_in_camera_space(slab):
     _, out = slab
     img = read_exr(out)
-    w2c = matrix(oiio_attributes(out), "worldToCamera")
+    w2c = matrix(out, "worldToCamera")
     ok = single_surface_pixels(img)
     p = img.layers["position"].astype(np.float64)
     pc = np.concatenate([p, np.ones(p.shape[:-1] + (1,))], axis=-1) @ w2c
@@ -184,18 +201,18 @@ def test_depth_is_distance_in_camera_space(slab):
 
 def test_tiled_and_turntable_frames_carry_the_same_attributes(slab, tmp_path):
     scene, out = slab
-    ref = oiio_attributes(out)
+    ref = exr_attributes(out)
     tiled = tmp_path / "tiled.exr"
     assert main(["render", str(scene), "-o", str(tiled), "--resolution", f"{W}x{H}", "--spp", "1",
                  "--tiles", "2", "-q"]) == 0
     frames = tmp_path / "tt"
     assert main(["turntable", str(scene), "-o", str(frames), "--frames", "2", "--resolution", f"{W}x{H}",
                  "--spp", "1", "-q"]) == 0
-    got = oiio_attributes(tiled)
+    got = exr_attributes(tiled)
     for name in CAMERA_ATTRS:
-        assert np.allclose(got[name][1], ref[name][1]), name
+        assert np.allclose(got[name], ref[name]), name
     # Frame 1 of a turntable is the scene's own camera; frame 2 has moved on.
-    f0, f1 = (oiio_attributes(frames / f"slab.{FIRST_FRAME + k}.exr") for k in range(2))
-    assert np.allclose(f0["worldToNDC"][1], ref["worldToNDC"][1], atol=1e-6)
-    assert not np.allclose(f1["worldToNDC"][1], ref["worldToNDC"][1])
+    f0, f1 = (exr_attributes(frames / f"slab.{FIRST_FRAME + k}.exr") for k in range(2))
+    assert np.allclose(f0["worldToNDC"], ref["worldToNDC"], atol=1e-6)
+    assert not np.allclose(f1["worldToNDC"], ref["worldToNDC"])
     assert f1["nearClip"] == ref["nearClip"] and f1["farClip"] == ref["farClip"]

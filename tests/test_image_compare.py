@@ -218,14 +218,20 @@ def _patched(render, factor):
     return patched
 
 
-def _check_renamed(made, name, render_fn):
-    """Check ``render_fn`` against golden 'sphere' stored under another name, so reports do not collide."""
-    g, golden_dir, reports = made
+def _renamed(made, name):
+    """Golden 'sphere' copied under another name (so that reports do not collide)."""
+    _, golden_dir, _ = made
     for suffix in (".exr", ".json"):
         dst = golden_dir / f"{name}{suffix}"
         if not dst.exists():
             dst.write_bytes((golden_dir / f"sphere{suffix}").read_bytes())
-    return gold.check_golden(name, render_fn, golden_dir=golden_dir, report_dir=reports)
+    return name
+
+
+def _check_renamed(made, name, render_fn):
+    """Check ``render_fn`` against golden 'sphere' stored under another name, so reports do not collide."""
+    _, golden_dir, reports = made
+    return gold.check_golden(_renamed(made, name), render_fn, golden_dir=golden_dir, report_dir=reports)
 
 
 def test_moments_are_deterministic_and_consistent(render):
@@ -365,13 +371,18 @@ def report_dir(made):
     return made[2]
 
 
-def test_golden_fixture(golden, render, update_goldens, made, tmp_path):
-    before = tmp_path / "before.exr"
-    before.write_bytes((made[1] / "sphere.exr").read_bytes())
-    # Under --update-goldens this re-makes the temporary golden first: with the
-    # box filter the renders repeat exactly, so the pixels must not change.
+def test_golden_fixture(golden, render, update_goldens, made):
+    """The ``golden`` fixture checks a render against the golden (re-made first under
+    ``--update-goldens``). Either way, the golden on disk afterwards holds the reference render
+    itself: seed ``REF_SEED`` at ``REF_SPP``, rendered here anew (with the box filter renders
+    repeat exactly), not a copy of the file. And the check compares: a render with one 8x8
+    window 25 % brighter fails through the fixture (outside ``--update-goldens``, which would
+    make that render the golden)."""
     assert golden("sphere", render, ref_spp=REF_SPP, test_spp=TEST_SPP).passed
-    np.testing.assert_array_equal(read_exr(made[1] / "sphere.exr").rgb, read_exr(before).rgb)
+    reference = render(gold.REF_SEED, REF_SPP)
+    np.testing.assert_array_equal(read_exr(made[1] / "sphere.exr").rgb, np.float32(reference.mean))
     if not update_goldens:
+        with pytest.raises(AssertionError, match=r"8x8 window at \(y=21, x=13\)"):
+            golden(_renamed(made, "fixture_patch"), _patched(render, 1.25), ref_spp=REF_SPP, test_spp=TEST_SPP)
         with pytest.raises(pytest.fail.Exception, match="--update-goldens"):
             golden("absent", render, ref_spp=REF_SPP, test_spp=TEST_SPP)
