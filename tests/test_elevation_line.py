@@ -20,7 +20,7 @@ variant()
 import drjit as dr  # noqa: E402
 import mitsuba as mi  # noqa: E402
 
-from arches_render.field import evaluate  # noqa: E402
+from arches_render.field import Blend, Box, evaluate  # noqa: E402
 from arches_render.field.lod import Footprint  # noqa: E402
 from arches_render.field.noise import NOISE_PLANAR_CURVATURE, fbm, fbm_gradient, gradient_noise  # noqa: E402
 from arches_render.generators.terrain.implicit_heightfield import ImplicitHeightfield  # noqa: E402
@@ -156,3 +156,31 @@ def test_free_lengths_along_lines_are_free(cone):
     near = climb & (up < 0.3) & (hart > 0)
     assert near.sum() > 100
     assert np.median(d0[near] / hart[near]) > 3.0
+
+
+@pytest.mark.parametrize("z", [50.0, 16.0], ids=["high", "near_ground"])
+def test_blend_caps_free_lengths_next_to_a_saturated_terrain(z):
+    """A block blended (radius T) onto the canyon: the terrain is -T in all of its air,
+    within the blend radius of the block's near-surface values, so only the caps of the
+    two-operand blend give the block's rays their own bound. Free lengths along rays
+    near the block are free (also where the block's underside sits in the terrain's
+    sigmoid band, where the seam is active), and most are near the block's own."""
+    T = CANYON.T_np
+    block = Box([60.0, 60.0, z], [10.0, 5.0, 4.0], rounding=1.0)
+    blend = Blend(CANYON, block, radius=T)
+    rng = np.random.default_rng(21)
+    n = 4000
+    # Points just outside the block's faces, rays in every direction.
+    p = np.array([60.0, 60.0, z]) + rng.uniform(-1, 1, (n, 3)) * [11.5, 6.5, 5.5]
+    p = p[evaluate(block, p) < -1e-3][:2000]
+    d = rng.normal(size=p.shape)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    f, (dist,) = blend.eval_bounds(_vec(p), (0.0,), _vec(d, mi.Vector3f))
+    _, (own,) = block.eval_bounds(_vec(p), (0.0,), _vec(d, mi.Vector3f))
+    dist, own = dist.numpy().astype(np.float64), own.numpy().astype(np.float64)
+    s = np.linspace(-1.0, 1.0, 65) * 0.999
+    q = (p[None] + (s[:, None, None] * dist[None, :, None]) * d[None]).reshape(-1, 3)
+    fq = evaluate(blend, q).reshape(len(s), len(p))
+    assert (dist > 0).mean() > 0.5 and fq[:, dist > 0].max() < 1e-4
+    if z > 30:  # (near the ground the terrain itself is near)
+        assert np.median(dist / own) > 0.9

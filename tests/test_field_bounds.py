@@ -48,6 +48,7 @@ def make_nodes():
         "intersection": F.Intersection(sphere, box),
         "difference": F.Difference(box, sphere),
         "blend": F.Blend(hf, cap, sphere, radius=0.8),
+        "blend_pair": F.Blend(hf, F.Union(cap, sphere), radius=0.8),
         "smooth_intersection": F.SmoothIntersection(sphere, box, radius=0.5),
         "translate": F.Transform.translate(cap, [1, 2, 3]),
         "rotate": F.Transform.rotate(box, [1, 1, 0], 37.0, pivot=[0.2, 0, 0]),
@@ -116,7 +117,7 @@ def test_local_distance_bound_is_free(name, level):
     assert free_ball_violations(node, level, None) <= 1e-4
 
 
-@pytest.mark.parametrize("name", ["heightfield", "blend", "culled_blend", "rotate", "union"])
+@pytest.mark.parametrize("name", ["heightfield", "blend", "blend_pair", "culled_blend", "rotate", "union"])
 def test_ray_distance_bound_is_free(name):
     for d in ([1, 0.3, -0.2], [0, 0, -1], [0.6, -0.8, 0.05], [-0.2, 0.4, 0.7]):
         v = np.asarray(d, float) / np.linalg.norm(d)

@@ -27,6 +27,21 @@ So two distinct operands reach ``-c'`` with ``c' = c + (n + 3) k / 4``, and
 
 which near one operand, far from the others, is that operand's own bound.
 
+Caps of a two-operand blend. ``smax_k`` is non-decreasing in each operand, so where
+``b < v`` (a *cap*, ``v < -c``), ``smax_k(a, b) >= -c`` needs ``smax_k(a, v) >= -c``, i.e.
+``a >= -c - (sqrt k - sqrt delta)^2`` with ``delta = -c - v`` (for ``delta < k``; solving
+``max(a, v) + (k - |a - v|)^2 / (4k) = -c`` on either side of ``a = v`` gives the same root;
+for ``delta >= k`` the seam cannot reach the level and ``a >= -c``). With ``v = -c - k
+CAP_BELOW``, ``b < v`` holds within ``d_b(c + k CAP_BELOW)`` of ``p``, so
+
+    d >= min(d_b(c + k CAP_BELOW), d_a(c + k CAP_SHIFT)),   CAP_SHIFT = (1 - sqrt CAP_BELOW)^2,
+
+and the same with the roles exchanged. It matters where one operand saturates a
+little below the level: an implicit terrain is ``-T`` in all of its air, within a
+blend radius ``k = T`` of an arch's surface values, so the ``(n + 3) k / 4`` shift above
+reaches below ``-T`` and left rays at the arch only Hart's bound with the terrain's
+large ``L`` (the arch bridge: 160 shadow steps a ray).
+
 References
 ----------
 Quilez, I. (2013). Smooth minimum. https://iquilezles.org/articles/smin/
@@ -40,6 +55,12 @@ import drjit as dr
 
 from .lod import lod_lipschitz
 from .node import Node, box_intersection, box_union, hart_bounds, opaque_float
+
+
+#: Caps of a two-operand blend (module docstring): the other operand below
+#: ``-c - CAP_BELOW k``, this one's level moves by ``CAP_SHIFT k = (1 - sqrt(CAP_BELOW))^2 k``.
+CAP_BELOW = 0.875
+CAP_SHIFT = (1.0 - CAP_BELOW ** 0.5) ** 2
 
 
 def smooth_max(a, b, k):
@@ -184,11 +205,18 @@ class Blend(_NAry):
         m = len(levels)
         seam = self.radius * ((len(self.children) + 3) * 0.25)
         asked = tuple(levels) + tuple(c + seam for c in levels)
-        v = None
+        capped = len(self.children) == 2
+        if capped:
+            # Caps (module docstring): each operand's own level c + sigma, and the
+            # level below which it leaves the other operand's seam nearly idle.
+            asked += tuple(c + CAP_SHIFT * self.radius for c in levels)
+            asked += tuple(c + CAP_BELOW * self.radius for c in levels)
+        v, answers = None, []
         for child in self.children:
             fc, dc = child.eval_bounds(p, asked, direction, footprint)
+            answers.append(dc)
             if v is None:
-                v, own, first, second = fc, list(dc[:m]), list(dc[m:]), [dr.inf] * m
+                v, own, first, second = fc, list(dc[:m]), list(dc[m:2 * m]), [dr.inf] * m
                 continue
             v = smooth_max(v, fc, self.radius)
             for i in range(m):
@@ -196,7 +224,14 @@ class Blend(_NAry):
                 second[i] = dr.minimum(second[i], dr.maximum(first[i], dc[m + i]))
                 first[i] = dr.minimum(first[i], dc[m + i])
         hart = hart_bounds(v, levels, lod_lipschitz(self, footprint))
-        return v, tuple(dr.maximum(dr.minimum(o, s2), h) for o, s2, h in zip(own, second, hart))
+        ds = [dr.maximum(dr.minimum(o, s2), h) for o, s2, h in zip(own, second, hart)]
+        if capped:
+            a, b = answers
+            for i in range(m):
+                # Within d_other(c + CAP_BELOW k) the other operand is below its cap.
+                ds[i] = dr.maximum(ds[i], dr.maximum(dr.minimum(b[3 * m + i], a[2 * m + i]),
+                                                     dr.minimum(a[3 * m + i], b[2 * m + i])))
+        return v, tuple(ds)
 
     def bounds(self):
         lo, hi = box_union([c.bounds() for c in self.children])
