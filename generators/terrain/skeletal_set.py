@@ -54,6 +54,8 @@ them so that one crowded cluster does not slow rays everywhere.
 Distance bounds below the threshold (the sum's caps), local slopes in small balls
 and the cores of carving sets are per-primitive bounds, derived and computed in
 :mod:`.skeletal_bounds`; the loop over a point's list here combines them.
+The constructor's arguments are checked, and the primitives sorted by group, in
+:mod:`.skeletal_params`.
 
 Footprint level of detail (:mod:`arches_render.field.lod`): with a footprint the
 star noise keeps the octaves the cone resolves. Its range is at most the full one
@@ -82,39 +84,19 @@ import numpy as np
 
 from arches_render.field.lod import OctaveLOD
 from arches_render.field.node import Node, box_distance, opaque_float
-from arches_render.field.noise import fbm, fbm_lipschitz, fbm_range
+from arches_render.field.noise import fbm, fbm_lipschitz
 from arches_render.field.brick_grid import BrickLayout
 from arches_render.field.primitive_set import empty_distance, grid_lists
 
 from .falloff import G_SLOPE, g_dr
 from .skeletal_bounds import core_bound, footprint_error, level_bound, local_slope, quiet_within
+from .skeletal_params import noise_params, primitive_arrays
 
 #: Largest radius of the balls in which ``eval_local`` bounds slopes, in cell edges.
 SLOPE_REACH = 0.125
 
 #: Distance bound of an empty level set (finite, so that ``0 * FAR`` stays 0).
 FAR = 1e10
-
-
-def _noise_params(noise):
-    """Validated star-noise parameters (or None)."""
-    if noise is None:
-        return None
-    p = dict(amplitude=0.2, wavelength=5.0, octaves=2, lacunarity=2.0, gain=0.5, seed=0)
-    unknown = set(noise) - set(p)
-    if unknown:
-        raise ValueError(f"unknown noise parameter(s): {', '.join(sorted(unknown))}")
-    p.update(noise)
-    if not p["wavelength"] > 0:
-        raise ValueError("noise wavelength must be > 0")
-    if not 1 <= int(p["octaves"]) <= 8:
-        raise ValueError("noise octaves must be in [1, 8]")
-    span = float(p["amplitude"]) * fbm_range(int(p["octaves"]), float(p["gain"]))
-    if not 0 <= span < 0.95:
-        raise ValueError(f"noise amplitude * fbm range must be in [0, 0.95) (got {span:.3g}): "
-                         "the radius would vanish")
-    p["span"] = span
-    return p
 
 
 class SkeletalSet(Node):
@@ -154,43 +136,13 @@ class SkeletalSet(Node):
 
     def __init__(self, a, b=None, radius=1.0, energy=1.0, core=0.0, group=None, noise=None,
                  combine="sum", threshold=0.0, cell_size=None, max_cells=1 << 20):
-        a = np.asarray(a, dtype=np.float64)
-        if a.ndim != 2 or a.shape[1] != 3 or len(a) == 0:
-            raise ValueError(f"a must be a non-empty (N, 3) array (got shape {a.shape})")
-        n = len(a)
-        b = a.copy() if b is None else np.asarray(b, dtype=np.float64)
-        if b.shape != a.shape:
-            raise ValueError(f"b must have the shape of a {a.shape} (got {b.shape})")
-        R = _per_prim(radius, n, "radius")
-        e = _per_prim(energy, n, "energy")
-        c = _per_prim(core, n, "core")
-        for name, v in (("a", a), ("b", b), ("radius", R), ("energy", e), ("core", c)):
-            if not np.all(np.isfinite(v)):
-                raise ValueError(f"{name} contains NaN or infinite values")
-        if not np.all(R > 0):
-            raise ValueError("radius must be > 0 for every primitive")
-        if not np.all(c >= 0):
-            raise ValueError("core must be >= 0 for every primitive")
-        if combine not in ("sum", "max"):
-            raise ValueError(f"combine must be 'sum' or 'max' (got {combine!r})")
-        if combine == "max" and np.any(e < 0):
-            raise ValueError("combine = 'max' needs energies >= 0")
         self.grouped = group is not None
-        grp = np.arange(n) if group is None else np.asarray(group)
-        if grp.shape != (n,) or not np.issubdtype(grp.dtype, np.integer) or np.any(grp < 0):
-            raise ValueError("group must be (N,) non-negative integers")
-        # Contiguous groups: cell lists keep index order, so members stay adjacent.
-        order = np.argsort(grp, kind="stable")
-        a, b, R, e, c, grp = a[order], b[order], R[order], e[order], c[order], grp[order]
-        if self.grouped:
-            first = np.r_[True, grp[1:] != grp[:-1]]
-            ge = np.repeat(e[first], np.diff(np.r_[np.flatnonzero(first), n]))
-            if not np.allclose(ge, e):
-                raise ValueError("primitives of one group (curve) must share their energy")
+        a, b, R, e, c, grp = primitive_arrays(a, b, radius, energy, core, group, combine)
+        n = len(a)
         self.n, self.combine = n, combine
         self.a_np, self.b_np, self.radius_np, self.energy_np, self.core_np = a, b, R, e, c
         self.group_np = grp
-        self.noise = _noise_params(noise)
+        self.noise = noise_params(noise)
         span = self.noise["span"] if self.noise else 0.0
         self.threshold_np = float(threshold)
 
@@ -593,12 +545,3 @@ class SkeletalSet(Node):
 
     def __repr__(self):
         return f"SkeletalSet(n={self.n}, combine={self.combine!r}, noise={bool(self.noise)})"
-
-
-def _per_prim(v, n, name):
-    arr = np.asarray(v, dtype=np.float64)
-    if arr.ndim == 0:
-        return np.full(n, float(arr))
-    if arr.shape != (n,):
-        raise ValueError(f"{name} must be one number or an ({n},) array (got shape {arr.shape})")
-    return arr.copy()
