@@ -83,8 +83,14 @@ def test_fbm_gradient_is_fbm_and_its_derivative():
 
 
 def test_noise_curvature_bound_holds_along_planar_lines():
-    """Second differences of the noise along horizontal lines stay below the proved
-    bound, and reach a good part of it (the bound is not vacuous in scale)."""
+    """Second differences of the noise along horizontal lines stay below the certified
+    bound and reach most of it (11.6 of 15.51: a loosened constant is noticed), and a
+    coarse run of the certificate itself is rigorous: finite and above the sampled
+    maximum of the configuration-wise curvature."""
+    from arches_render.field import noise_curvature as nc
+    cert = nc.certify(25.0, grid=8, angles=16, max_depth=3)
+    assert cert.sampled <= cert.bound <= 25.0 and cert.sampled > 13.5
+    assert NOISE_PLANAR_CURVATURE >= cert.sampled
     rng = np.random.default_rng(5)
     n = 200_000
     p = rng.uniform(-50, 50, (n, 3))
@@ -95,7 +101,7 @@ def test_noise_curvature_bound_holds_along_planar_lines():
     f = [gradient_noise(_vec(p + k * h * e), seed).numpy().astype(np.float64) for k in (-1, 0, 1)]
     second = np.abs(f[0] - 2 * f[1] + f[2]) / h ** 2
     assert second.max() <= NOISE_PLANAR_CURVATURE
-    assert second.max() > 0.1 * NOISE_PLANAR_CURVATURE
+    assert second.max() > 0.6 * NOISE_PLANAR_CURVATURE
 
 
 def _footprint_field(q, fp):
