@@ -104,6 +104,15 @@ class Footprint:
         return Footprint(self.radius * factor, self.rate)
 
 
+def select_table(values, n):
+    """``values[n]`` per lane for a per-lane count ``n`` (``mi.Float``; clamped to the table),
+    as a chain of selects over a short Python table of floats."""
+    out = mi.Float(values[0])
+    for i, v in enumerate(values[1:], 1):
+        out = dr.select(n >= i, v, out)
+    return out
+
+
 def kappa(lacunarity: float) -> float:
     """``kappa(l) = LOD_FACTOR l N / (L_n ln l)``; 0 where level of detail is off."""
     l = float(lacunarity)
@@ -165,19 +174,29 @@ class OctaveLOD:
         # log2 of 0 is -inf: a zero footprint keeps every octave.
         return (self._log_ratio - dr.log2(footprint.radius)) * self._inv_log2_l
 
-    def _table(self, values, n):
-        out = mi.Float(values[0])
-        for i, v in enumerate(values[1:], 1):
-            out = dr.select(n >= i, v, out)
-        return out
+    def acting(self, x):
+        """``n = clamp(ceil(x + 1), 0, K)``: the octaves that can act within the ball of
+        :meth:`ball` around a point of level ``x`` (module docstring)."""
+        return dr.clip(dr.ceil(x + 1.0), 0.0, float(self.octaves))
+
+    def ball(self, footprint):
+        """``rho = fp (1 - 1/l) / s``: the radius within which the footprint stays above
+        ``fp / l`` (infinite for a rate of 0)."""
+        s = footprint.rate
+        return dr.select(s > 0.0, footprint.radius * self._shrink * dr.rcp(s), dr.inf)
+
+    def slope_parts(self, n):
+        """``(a L_n / lambda) P_n`` and ``c Q_n`` of the module docstring for ``n`` acting
+        octaves (``mi.Float`` or int): the slope of their sum and, per unit rate ``s``, the
+        slope of their fade."""
+        return select_table(self._P, n), select_table(self._Q, n)
 
     def slope(self, x, footprint):
         """``(S, rho)``: slope bound of the truncated sum within ``rho`` of the point
         whose level is ``x`` (module docstring), as ``mi.Float`` each."""
-        n = dr.clip(dr.ceil(x + 1.0), 0.0, float(self.octaves))
-        s = footprint.rate
-        S = self._table(self._P, n) + s * self._table(self._Q, n)
-        rho = dr.select(s > 0.0, footprint.radius * self._shrink * dr.rcp(s), dr.inf)
+        P, Q = self.slope_parts(self.acting(x))
+        S = P + footprint.rate * Q
+        rho = self.ball(footprint)
         return S, rho
 
     def global_slope(self, footprint):
@@ -202,4 +221,4 @@ class OctaveLOD:
             return mi.Float(0.0)
         n = dr.clip(dr.floor(x), 0.0, float(self.octaves))
         w = dr.clip(x - n, 0.0, 1.0)
-        return dr.maximum(self._table(self._T, n) - w * self._table(self._G, n), 0.0)
+        return dr.maximum(select_table(self._T, n) - w * select_table(self._G, n), 0.0)

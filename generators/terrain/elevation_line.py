@@ -59,14 +59,12 @@ instead of a ball).
 
 from __future__ import annotations
 
-import math
-
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from arches_render.field.lod import LOD_FACTOR
-from arches_render.field.noise import NOISE_LIPSCHITZ, NOISE_RANGE, fbm_curvature
+from arches_render.field.lod import select_table
+from arches_render.field.noise import fbm_curvature, fbm_range
 
 #: ``max |d/du smoothstep(u)|``: the taper weight is ``1.5 / taper``-Lipschitz.
 TAPER_SLOPE = 1.5
@@ -129,31 +127,19 @@ class ElevationLineBound:
         self.amp = amp
         if amp is None:
             return
+        # Slope and fade tables of the acting octaves: the fBm's OctaveLOD's.
+        self.lod = hf._lod
         a, lam = abs(float(amp["amplitude"])), float(amp["wavelength"])
         lac, gain, octaves = float(amp["lacunarity"]), float(amp["gain"]), int(amp["octaves"])
-        gl = gain * lac
-        powers = [gl ** k for k in range(octaves)]
-        #: Per n = 0..octaves: slope S_n, fade slope per unit rate Q_n, curvature C_n (metres).
-        self._S = [a * NOISE_LIPSCHITZ / lam * sum(powers[:n]) for n in range(octaves + 1)]
-        log_l = math.log(lac) if lac > 1.0 else 1.0
-        self._Q = [a * NOISE_RANGE * LOD_FACTOR * lac / (lam * log_l) * max(powers[:n], default=0.0)
-                   for n in range(octaves + 1)]
+        #: Curvature bound of the first n = 0..octaves octaves along a horizontal line (1/m).
         self._C = [a / lam ** 2 * c for c in fbm_curvature(octaves, lac, gain)]
-        self.range_m = a * NOISE_RANGE * sum(gain ** k for k in range(octaves))
+        self.range_m = a * fbm_range(octaves, gain)
         self.inv_taper = 1.0 / amp["taper"] if amp["taper"] > 0 else 0.0
         # The fade band, grown by the ball's reach: elsewhere w_t is constant.
         x0, y0, x1, y1 = hf.extent
         self.sides = tuple(float(v) for v in (x0, y0, x1, y1))
         self.band = (float(amp["border"]) - self.cell, float(amp["border"] + amp["taper"]) + self.cell)
-        self.lac_over_log = lac / log_l
-        self.shrink = 1.0 - 1.0 / lac if lac > 1.0 else 0.0
-
-    @staticmethod
-    def _table(values, n):
-        out = mi.Float(values[0])
-        for i, v in enumerate(values[1:], 1):
-            out = dr.select(n >= i, v, out)
-        return out
+        self.lac_over_log = lac / self.lod.log_l
 
     def free_lengths(self, p, u, v, k, shifts, a0, level, footprint):
         """Two-sided free lengths of the line through the point with ``v = h - z`` along
@@ -193,13 +179,14 @@ class ElevationLineBound:
         K = mi.Float(0.0)
         centre = -u.z
         if self.amp is not None:
-            n = mi.Float(len(self._S) - 1)
+            n = mi.Float(self.lod.octaves)
             rate = mi.Float(0.0)
             if level is not None:
-                n = dr.clip(dr.ceil(level + 1.0), 0.0, float(len(self._S) - 1))
+                n = self.lod.acting(level)
                 rate = footprint.rate
-                rho = dr.minimum(rho, dr.select(rate > 0.0, footprint.radius * self.shrink * dr.rcp(rate), dr.inf))
-            S, Q, C = (self._table(t, n) for t in (self._S, self._Q, self._C))
+                rho = dr.minimum(rho, self.lod.ball(footprint))
+            S, Q = self.lod.slope_parts(n)
+            C = select_table(self._C, n)
             fade = rate * Q
             taper = TAPER_SLOPE * self.inv_taper * run
             if self.inv_taper:
