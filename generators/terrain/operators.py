@@ -46,6 +46,17 @@ ground inside that band fell back to Hart's bound: 297 shadow steps a ray agains
 between operands that add matter (``M > 0``): next to a carving set (``M <= 0``) the
 global shift is already small, and the extra levels would only cost time.
 
+Slanted levels: caps help only where the terrain sits at its air value; over the
+goblins' hoodoos the terrain's falloff band holds the whole of every hoodoo, and there
+rays near a wall fell back to Hart's bound with the set's slope (90-190, against true
+gradients of 8-30; bounce rays 90 steps on average). One set that adds matter and
+answers slanted levels (:mod:`.skeletal_bounds`, "Slanted levels") is evaluated after
+the other operands; with ``S`` their summed slope bound and ``f_o(p)`` their summed
+value, ``f_o(q) <= f_o(p) + S |q - p|``, so the set's radius in which ``F(q) <
+-c - f_o(p) - S |q - p|`` is free of ``{sum f >= -c}``: the set's geometric
+level bounds with the terrain's small slope (goblins: bounce steps 90 -> 44, camera
+61 -> 44, shadow 92 -> 65).
+
 ``LocalWarp``: ``f~(p) = f(w(p))``, ``w(p) = p + delta(p) m(p)``, with
 ``delta = a W(p / lambda)`` three decorrelated fBm (as in
 :class:`arches_render.field.DomainWarp`) and ``m = clamp(f_D, 0, 1)`` the control field
@@ -151,15 +162,34 @@ class Sum(Node):
         for j in {j for plan in plans if plan for j in plan}:
             asks[j] = (asks[j] or []) + [-caps[j]]
         radii = (self.slope_radii if levels else ()) + asked
-        f, answers, slopes = None, [], None
-        for child, ask in zip(kids, asks):
-            if ask is not None or radii:  # (no levels: a culled child still skips far work)
+        steep = self._steep_child() if levels else None
+        order = [i for i in range(len(kids)) if i != steep] + ([] if steep is None else [steep])
+        values, answers, parts, slanted = [None] * len(kids), [None] * len(kids), [None] * len(kids), ()
+        for i in order:
+            child, ask = kids[i], asks[i]
+            if i == steep:
+                # Slanted levels (module docstring): the others' values at p, their slope.
+                rest = None
+                for v in values:
+                    rest = v if rest is None else (rest if v is None else rest + v)
+                slope = 0.0
+                for k, other in enumerate(kids):
+                    if k != i:
+                        grow = 1.0 + other.lod_kappa * footprint.rate if footprint is not None else 1.0
+                        slope = slope + other.lipschitz * grow
+                ask = tuple(ask or ())
+                fc, dc, sc = child.eval_local(p, ask, direction, footprint, radii,
+                                              slants=tuple((c + rest, slope) for c in levels))
+                dc, slanted = dc[:len(ask)], dc[len(ask):]
+            elif ask is not None or radii:  # (no levels: a culled child still skips far work)
                 fc, dc, sc = eval_local(child, p, tuple(ask or ()), direction, footprint, radii)
             else:
                 fc, dc, sc = child.eval(p), (), ()
+            values[i], answers[i], parts[i] = fc, dc, sc
+        f, slopes = None, None
+        for fc, sc in zip(values, parts):  # in the children's order: the same float sum
             f = fc if f is None else f + fc
             slopes = sc if slopes is None else tuple(a + b for a, b in zip(slopes, sc))
-            answers.append(dc)
         ds = [None] * n
         for i, plan in enumerate(plans):
             if plan is None:
@@ -173,6 +203,8 @@ class Sum(Node):
                     rho = rj if rho is None else dr.minimum(rho, rj)
                 own = [dr.maximum(g, dr.minimum(rho, d)) for g, d in zip(own, answers[i][n:2 * n])]
             ds = [d if old is None else dr.maximum(old, d) for old, d in zip(ds, own)]
+        ds = [d if g is None else (g if d is None else dr.maximum(d, g))
+              for d, g in zip(ds, slanted or (None,) * n)]
         L, r = 0.0, None
         for child in kids:
             Lc, rc = local_lipschitz(child, p)
@@ -191,6 +223,13 @@ class Sum(Node):
                          for h, c in zip(hart, levels))
         out = tuple(h if d is None else dr.maximum(d, h) for d, h in zip(ds, hart))
         return f, out, tuple((slopes or ())[own:])
+
+    def _steep_child(self):
+        """The operand bounded by slanted levels (module docstring): the one set that
+        adds matter and answers them, or ``None`` (none, or more than one)."""
+        steep = [i for i, c in enumerate(self.children)
+                 if getattr(c, "slanted_levels", False) and (value_max(c) or 0.0) > 0.0]
+        return steep[0] if len(steep) == 1 and len(self.children) > 1 else None
 
     @property
     def slope_radii(self):

@@ -40,6 +40,23 @@ in the ball (curves: their members' maximum; ``"max"`` sets: the maximum), where
 (:func:`.falloff.falloff_slope_max`). Where the noise is skipped (``rho >= D_max``)
 ``x = 1`` is exact too. A footprint multiplies ``L_i`` by ``1 + kappa s``.
 
+Slanted levels (a set summed with a smooth operand, :class:`.operators.Sum`). Where
+a terrain ``f_T`` has a small slope bound ``L_T`` and the set adds steep matter on it
+(the goblins' hoodoos: ``e = 40`` over ``R`` of 0.6-8 m, ``|grad F|`` bounded by
+90-190 near their walls, true 8-30), ``f_T + F >= -c`` at ``q`` with ``|q - p| <= delta``
+needs ``F(q) >= u0 - L_T delta``, ``u0 = -c - f_T(p)``. So a radius ``delta`` in which
+every primitive stays below ``u0 - L_T delta`` bounds the distance to the sum's level
+set, with the *geometric* slope of the level bounds above (``1 + x L_D``, about 1.5)
+instead of Hart's over the falloff's steepest part. The condition is
+``delta <= d_k(u0 - L_T delta)`` for each ``k``, ``d_k(u)`` a level bound (decreasing
+in ``delta``, since ``x`` grows as ``u`` falls). With ``a = min(d_k(u0), cap)`` and
+``b = d_k(u0 - L_T a)``: ``b <= a`` (the lower level's bound is smaller) and, for
+``delta <= min(b, cap)``, ``u0 - L_T delta >= u0 - L_T a`` so ``F_k < u0 - L_T a <=
+u0 - L_T delta`` in the ball. The minimum over the listed primitives, at most one cell
+edge (a primitive left out of the near list is 0 within it) or the empty-cell
+distance, and at most ``cap < u0 / L_T`` (so the level stays positive and every
+unlisted primitive, 0 there, is below it) is the bound (:func:`slanted_bound`).
+
 Cores (carving sets, every ``e_i <= 0``). Then ``F <= F_i`` for each ``i``, so
 ``F >= u`` (``u < 0``) needs ``e_i g(d~_i) >= u``, i.e. ``d~_i >= x = sqrt(1 - (u/e_i)^(1/3))``
 (where ``|e_i| > |u|``), i.e. ``rho_i >= x D >= x D_min``; ``rho_i`` being 1-Lipschitz,
@@ -63,7 +80,10 @@ from arches_render.field.node import box_distance
 
 from .falloff import G_SLOPE, falloff_slope_max
 
-__all__ = ["level_bound", "core_bound", "local_slope", "footprint_error", "quiet_within"]
+#: Distance bound of an empty level set (finite, so that ``0 * FAR`` stays 0).
+FAR = 1e10
+
+__all__ = ["level_bound", "slanted_bound", "core_bound", "local_slope", "footprint_error", "quiet_within"]
 
 
 def level_bound(node, k, e, geometry, u, rate=None):
@@ -89,6 +109,19 @@ def level_bound(node, k, e, geometry, u, rate=None):
         local = dr.minimum(0.5 * r, (rho - x * D) * dr.rcp(1.0 + x * lip_D))
         bound = dr.maximum(bound, local)
     return acts, bound
+
+
+def slanted_bound(node, k, e, geometry, u0, slope, cap, rate=None):
+    """Lower bound of the radius ``delta`` of a ball around ``p`` in which
+    ``F_k(q) < u0 - slope delta`` (module docstring, "Slanted levels"), or ``FAR``
+    where primitive ``k`` reaches no level of the ball. ``u0 > 0``, ``slope > 0`` and
+    ``cap`` (the largest radius the caller accepts, ``< u0 / slope``) per lane.
+
+    Two passes of :func:`level_bound`: ``a = min(d_k(u0), cap)``, then ``d_k(u0 - slope a)``."""
+    acts, first = level_bound(node, k, e, geometry, u0, rate)
+    a = dr.select(acts, dr.clip(first, 0.0, cap), cap)
+    acts, second = level_bound(node, k, e, geometry, u0 - slope * a, rate)
+    return dr.select(acts, second, FAR)
 
 
 def core_bound(node, k, e, geometry, u):

@@ -89,14 +89,12 @@ from arches_render.field.brick_grid import BrickLayout
 from arches_render.field.primitive_set import empty_distance, grid_lists
 
 from .falloff import G_SLOPE, g_dr
-from .skeletal_bounds import core_bound, footprint_error, level_bound, local_slope, quiet_within
+from .skeletal_bounds import FAR, core_bound, footprint_error, level_bound, local_slope, quiet_within, slanted_bound
 from .skeletal_params import noise_params, primitive_arrays
 
 #: Largest radius of the balls in which ``eval_local`` bounds slopes, in cell edges.
 SLOPE_REACH = 0.125
 
-#: Distance bound of an empty level set (finite, so that ``0 * FAR`` stays 0).
-FAR = 1e10
 
 
 class SkeletalSet(Node):
@@ -395,30 +393,34 @@ class SkeletalSet(Node):
         """Combined field ``F(p)`` (before the threshold) as ``mi.Float``."""
         return self._accumulate(p, (self._start, self._count, self._index))[0]
 
-    def _accumulate(self, p, lists, us=(), footprint=None, radii=()):
+    def _accumulate(self, p, lists, us=(), footprint=None, radii=(), slants=()):
         """``(F(p), ds, slopes)``: the field over the cell lists ``lists`` (CSR ``start,
         count, index``); for each ``u`` of ``us``, the smallest :func:`.skeletal_bounds.level_bound` over
         them (``FAR`` where none acts) or, for a carving set (no positive energy), the
         largest :func:`.skeletal_bounds.core_bound`; for each radius of ``radii``, the local slope
         bound of :func:`.skeletal_bounds.local_slope` summed over the listed primitives (one member
-        per curve: their maximum). Primitives listed but not touching ``p`` add
-        exactly 0, so the near lists give the same ``F`` as the cell lists. With a
-        ``footprint``, the footprint field (star noise truncated)."""
+        per curve: their maximum); for each ``(u0, slope, cap)`` of ``slants``, the smallest
+        :func:`.skeletal_bounds.slanted_bound` (after the levels' bounds in ``ds``).
+        Primitives listed but not touching ``p`` add exactly 0, so the near lists give
+        the same ``F`` as the cell lists. With a ``footprint``, the footprint field
+        (star noise truncated)."""
         level = self._lod.level(footprint) if self.noise else None
         rate = footprint.rate if level is not None else None
         start_a, count_a, index_a = lists
         cell, stored, _, inside = self._cell(p)
         start = dr.gather(mi.UInt32, start_a, cell, stored)
         count = dr.select(inside, dr.gather(mi.UInt32, count_a, cell, stored), 0)
-        n_u = len(us)
+        n_u = len(us) + len(slants)
 
         def visit(k, ds):
             """``(e, g, ds, slopes)`` of primitive ``k``."""
             e = dr.gather(mi.Float, self._e, k)
-            if not us and not radii:
+            if not n_u and not radii:
                 return e, self._falloff(p, k, level=level), ds, ()
             geometry = self._falloff(p, k, True, level)
             out = []
+            for (u0, slope, cap), d in zip(slants, ds[len(us):]):
+                out.append(dr.minimum(d, slanted_bound(self, k, e, geometry, u0, slope, cap, rate)))
             for u, d in zip(us, ds):
                 if carving:
                     out.append(dr.maximum(d, core_bound(self, k, e, geometry, u)))
@@ -426,10 +428,11 @@ class SkeletalSet(Node):
                 acts, bound = level_bound(self, k, e, geometry, u, rate)
                 out.append(dr.select(acts, dr.minimum(d, bound), d))
             slopes = tuple(local_slope(self, k, e, geometry, rad, rate) for rad in radii)
+            out = out[len(slants):] + out[:len(slants)]  # levels first, as in ds
             return e, geometry[0], tuple(out), slopes
 
         carving = self.value_max <= 0
-        far = tuple(mi.Float(0.0 if carving else FAR) for _ in us)
+        far = tuple(mi.Float(0.0 if carving else FAR) for _ in us) + tuple(mi.Float(FAR) for _ in slants)
         zeros = tuple(mi.Float(0.0) for _ in radii)
         if self.combine == "max" or not self.grouped:
             def body(i, acc, *rest):
@@ -481,11 +484,22 @@ class SkeletalSet(Node):
     def eval_bounds(self, p, levels, direction=None, footprint=None):
         return self.eval_local(p, levels, direction, footprint)[:2]
 
-    def eval_local(self, p, levels, direction=None, footprint=None, radii=()):
+    #: :meth:`eval_local` answers slanted levels (:mod:`.skeletal_bounds`).
+    slanted_levels = True
+
+    #: Where a slanted bound stops: this fraction of the radius ``u0 / slope`` at which
+    #: the slanted level reaches 0.
+    SLANT_CAP = 0.75
+
+    def eval_local(self, p, levels, direction=None, footprint=None, radii=(), slants=()):
         """``(f, ds, slopes)``: :meth:`eval_bounds` and, for each radius of ``radii``, a
         bound of ``|grad f|`` in the ball of that radius around ``p`` (module
         docstring, "Local slopes"; up to :attr:`local_radius` from the same loop over
-        the primitives, up to a cell edge from the cell tables, beyond that global)."""
+        the primitives, up to a cell edge from the cell tables, beyond that global).
+
+        ``slants``: pairs ``(c, slope)`` (per-lane ``c``, ``slope > 0``); for each, a
+        radius around ``p`` in which ``f(q) < -c - slope |q - p|``, appended to ``ds``
+        (:func:`.skeletal_bounds.slanted_bound`). Sets that add matter only."""
         # Local Hart bounds: min(r, (-f - c) / L) where the ball of radius r has slope
         # <= L (the cell tables, and each radius of radii). Levels below the threshold
         # ({F >= u}, u > 0) add the geometric bounds of .skeletal_bounds, and carving
@@ -494,12 +508,16 @@ class SkeletalSet(Node):
             footprint = None
         carving = self.value_max <= 0
         us = [self._threshold - c for c in levels] if self._near is not None or carving else []
-        slopes = ()
-        if us or radii:
+        if slants and self._near is None:
+            raise ValueError("slanted levels need a set that adds matter")
+        slants = [(self._threshold - c, slope, dr.maximum(self._threshold - c, 0.0) * (self.SLANT_CAP / slope))
+                  for c, slope in slants]
+        slopes, geo = (), []
+        if us or radii or slants:
             # Caps need the near lists (a superset of the slope lists); cores need
             # only the primitives whose support holds p.
             lists = self._near if self._near is not None else self._slope_lists
-            F, geo, slopes = self._accumulate(p, lists, us, footprint, radii)
+            F, geo, slopes = self._accumulate(p, lists, us, footprint, radii, slants)
             f = F - self._threshold
         elif footprint is not None:
             f = self._accumulate(p, (self._start, self._count, self._index), (), footprint)[0] - self._threshold
@@ -532,7 +550,7 @@ class SkeletalSet(Node):
             # Cores (.skeletal_bounds): where some primitive alone is below u; no
             # positive energy, so {F >= u} is empty for every u > 0.
             ds = [dr.select(u > 0.0, FAR, dr.select(u < 0.0, dr.maximum(d, g), d)) for d, g, u in zip(ds, geo, us)]
-        elif us:
+        elif us or slants:
             empty = dr.select(stored, dr.gather(mi.Float, self._empty, cell, stored),
                               dr.gather(mi.Float, self._brick_empty, brick, ~stored))
             outside = box_distance(p, self._support_lo, self._support_hi)
@@ -541,6 +559,7 @@ class SkeletalSet(Node):
                              outside) for g in geo]
             ds = [dr.select(u > self._peak, FAR, dr.select(u > 0.0, dr.maximum(d, g), d))
                   for d, g, u in zip(ds, geo, us)]
+            ds += [dr.minimum(g, cap) for g, (_, _, cap) in zip(geo[len(us):], slants)]
         return f, tuple(ds), tuple(slopes)
 
     def __repr__(self):
