@@ -104,11 +104,31 @@ def test_power_check_names_the_spp_it_needs():
     truth = _smooth_image()
     ref, test = _gaussian_render(truth, 16, 6.0, rng), _gaussian_render(truth, 4, 6.0, rng)
     weak = power_check(ref, test)
-    assert len(weak) == 2 and "1% global brightening" in weak[0] and "25% brightening" in weak[1]
+    assert len(weak) == 4
+    for w, what in zip(weak, ("1% global brightening", "1% global darkening", "25% brightening", "25% darkening")):
+        assert what in w
     need = max(int(w.split("about ")[1].split(" spp")[0]) for w in weak)
     assert need > 4
     ref2, test2 = _gaussian_render(truth, 4 * need, 6.0, rng), _gaussian_render(truth, need, 6.0, rng)
     assert power_check(ref2, test2) == []
+
+
+def test_power_check_is_not_passed_by_luck():
+    """A render whose own mean already sits near the limit "detects" a 1 % brightening
+    worth about one sigma: the injected change fails the mean test, but only by the
+    render's luck. The power check must not count it (issue 36, review item 1)."""
+    rng = np.random.default_rng(21)
+    truth = _smooth_image()
+    ref, test = _gaussian_render(truth, 64, 1.4, rng), _gaussian_render(truth, 16, 1.4, rng)
+    z0 = welch_compare(ref, test).mean_z[3]
+    gain = welch_compare(ref, test.brightened(1.01)).mean_z[3] - z0
+    assert 0.5 < gain < 2.0  # the 1 % change alone is about one sigma
+    lucky = test.brightened(1.0 + 0.01 * (3.8 - z0) / gain)  # own z about +3.8, limit 4.21
+    assert welch_compare(ref, lucky).passed
+    assert not welch_compare(ref, lucky.brightened(1.01)).passed  # detected, by luck
+    weak = power_check(ref, lucky)
+    assert any("1% global brightening is not proven" in w for w in weak)
+    assert any("1% global darkening is not proven" in w for w in weak)
 
 
 def test_a_single_void_pixel_fails_on_coverage():
