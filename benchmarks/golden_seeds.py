@@ -33,7 +33,13 @@ def main(argv=None) -> int:
 
     sys.path.insert(0, str(REPO / "tests"))
     from helpers import SCENES, variant  # noqa: E402  (the tests' scene list and variant)
-    from test_golden_scenes import HEIGHT, SHIPPED, WIDTH, spp_of  # noqa: E402
+    from arches_render import tomlfile
+    checks = tomlfile.load(REPO / "golden" / "checks.toml")  # as tests/test_golden_scenes.py
+    width, height = checks["resolution"]
+    shipped = sorted(p.stem for p in SCENES.glob("*.toml"))
+
+    def spp_of(name):
+        return int(checks["spp_of"].get(name, checks["spp"]))
     variant()
     from arches_render.imaging.golden import load_golden
     from arches_render.imaging.welch import power_check, welch_compare
@@ -41,9 +47,9 @@ def main(argv=None) -> int:
     from arches_render.scene import load_scene
 
     total = failed = 0
-    for name in args.names or SHIPPED:
+    for name in args.names or shipped:
         g = load_golden(name, REPO / "golden")
-        scene = build_scene(load_scene(SCENES / f"{name}.toml"), "field", WIDTH, HEIGHT, moments=True)
+        scene = build_scene(load_scene(SCENES / f"{name}.toml"), "field", width, height, moments=True)
         spp = spp_of(name)
         fails, worst_window, worst_mean, t0 = [], 0.0, 0.0, time.perf_counter()
         for seed in range(args.first, args.first + args.seeds):
