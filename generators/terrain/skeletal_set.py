@@ -491,14 +491,21 @@ class SkeletalSet(Node):
     #: the slanted level reaches 0.
     SLANT_CAP = 0.75
 
+    def _slant_cap(self, u0, slope, reach):
+        """Largest radius of a slanted bound: ``SLANT_CAP u0 / slope`` (the level stays
+        positive), at most ``reach``."""
+        cap = dr.maximum(u0, 0.0) * self.SLANT_CAP * dr.rcp(dr.maximum(slope, 1e-12))
+        return cap if reach is None else dr.minimum(cap, reach)
+
     def eval_local(self, p, levels, direction=None, footprint=None, radii=(), slants=()):
         """``(f, ds, slopes)``: :meth:`eval_bounds` and, for each radius of ``radii``, a
         bound of ``|grad f|`` in the ball of that radius around ``p`` (module
         docstring, "Local slopes"; up to :attr:`local_radius` from the same loop over
         the primitives, up to a cell edge from the cell tables, beyond that global).
 
-        ``slants``: pairs ``(c, slope)`` (per-lane ``c``, ``slope > 0``); for each, a
-        radius around ``p`` in which ``f(q) < -c - slope |q - p|``, appended to ``ds``
+        ``slants``: triples ``(c, slope, reach)`` (per lane; ``reach``: the radius
+        within which the caller's ``slope`` holds, ``None`` for everywhere); for each,
+        a radius around ``p`` in which ``f(q) < -c - slope |q - p|``, appended to ``ds``
         (:func:`.skeletal_bounds.slanted_bound`). Sets that add matter only."""
         # Local Hart bounds: min(r, (-f - c) / L) where the ball of radius r has slope
         # <= L (the cell tables, and each radius of radii). Levels below the threshold
@@ -510,8 +517,8 @@ class SkeletalSet(Node):
         us = [self._threshold - c for c in levels] if self._near is not None or carving else []
         if slants and self._near is None:
             raise ValueError("slanted levels need a set that adds matter")
-        slants = [(self._threshold - c, slope, dr.maximum(self._threshold - c, 0.0) * (self.SLANT_CAP / slope))
-                  for c, slope in slants]
+        slants = [(self._threshold - c, slope, self._slant_cap(self._threshold - c, slope, reach))
+                  for c, slope, reach in slants]
         slopes, geo = (), []
         if us or radii or slants:
             # Caps need the near lists (a superset of the slope lists); cores need
