@@ -17,7 +17,12 @@ at the test spp with another seed, compares with
 :func:`arches_render.imaging.welch.welch_compare` (Welch's statistic per pixel,
 per window and for the image mean; coverage and depth per pixel), and proves
 with :func:`arches_render.imaging.welch.power_check`, on that same render, that
-a 1 % global and a 25 % local brightening would have failed. Because the
+a 1 % global change and a 25 % change of the weakest bright-enough 8 x 8 window,
+each up and down, would have failed. What that does not prove: a 25 % change of a
+window darker than a quarter of the image's mean luminance
+(:data:`arches_render.imaging.welch.DARK_WINDOW`: shadowed rock under sky light,
+where proving it took 150-700 spp); the window test covers those windows with no
+proven power. Because the
 reference's own noise is in the test, it needs only a few times the test's
 samples (:data:`REF_SPP_FACTOR`), not a converged image.
 
@@ -326,7 +331,7 @@ def check_golden(name: str, render: RenderFn, *, golden_dir: str | os.PathLike,
         (an :class:`AssertionError`) when the golden is stale or inconsistent.
     GoldenWeakError
         When the test render could not have caught a 1 % global or a 25 % local
-        brightening (its message names the spp that would).
+        change, up or down (its message names the spp that would).
     AssertionError
         When the comparison fails; the message names the failed tests and the
         report folder.
