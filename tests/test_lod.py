@@ -277,15 +277,19 @@ def _lod_render(desc, lod, spp, seed, width=None, height=None):
     return moments_of(rgb, layers, spp), float(layers["steps"][0].mean())
 
 
-def _same_image_fewer_steps(full, lod):
+def _same_image_fewer_steps(full, lod, proven=False):
     """Level of detail leaves the image as it was (the golden tests' Welch tests on the beauty,
     with independent samples, and the image mean within 1 %) and takes fewer tracer steps. The
     depth is not compared: truncated octaves move the surface by less than a pixel's footprint,
-    which the depth test resolves (mini: |z| 6.7 at 64 spp)."""
-    from arches_render.imaging.welch import welch_compare
+    which the depth test resolves (mini: |z| 6.7 at 64 spp). ``proven``: the level-of-detail
+    render must also pass the golden tests' power check (a 1 % global and a 25 % window
+    change, up and down, would have failed)."""
+    from arches_render.imaging.welch import power_check, welch_compare
     (fm, fsteps), (lm, lsteps) = full, lod
     res = welch_compare(fm, lm, geometry=False)
     assert res.passed, res.summary()
+    if proven:
+        assert power_check(fm, lm) == [], "too few samples to tell a 1 % shift or a 25 % patch"
     rel = abs(lm.mean.mean() / fm.mean.mean() - 1)
     assert rel <= 0.01, f"image mean shift {rel:.4f}"
     assert lsteps < fsteps, f"level of detail took {lsteps:.2f} steps per camera ray, full detail {fsteps:.2f}"
@@ -293,7 +297,10 @@ def _same_image_fewer_steps(full, lod):
 
 def test_level_of_detail_image_agrees_with_full_detail():
     """Octaves below the pixel skipped: the same image within noise, in fewer steps (mini:
-    16.7 against 18.0 per camera ray, measured)."""
+    16.7 against 18.0 per camera ray, measured). Not proven at this spp: at 64 spp against a
+    256-spp full-detail reference the window test fails at the sphere's rim in 2 of 3 seeds
+    (rim windows 15-61 % darker; full detail against itself passes): without their sub-pixel
+    bumps grazing rays cover less of a rim pixel. Issue 36, item 4: open."""
     import tomllib
 
     from arches_render.scene import parse_scene
@@ -305,10 +312,13 @@ def test_level_of_detail_image_agrees_with_full_detail():
 def test_default_scene_level_of_detail_agrees_and_is_deterministic():
     """The default scene at low resolution: with level of detail, the same bits twice
     (shadow rays included; the second render reuses the kernels), and the same image as
-    full detail within noise, in fewer steps (7.3 against 7.5 per camera ray, measured)."""
+    full detail within noise, proven at 64 spp against a 256-spp full-detail reference
+    (as a golden's check: its power check passes, 3 of 3 seeds), in fewer steps (5.2
+    against 5.5 per camera ray, measured)."""
     from arches_render.scene import load_scene
 
     desc = load_scene(SCENES / "default.toml")
     a, b = (_lod_render(desc, True, 8, 1, 80, 45) for _ in range(2))
     assert np.array_equal(a[0].mean, b[0].mean) and a[1] == b[1]
-    _same_image_fewer_steps(_lod_render(desc, False, 8, 2, 80, 45), a)
+    _same_image_fewer_steps(_lod_render(desc, False, 256, 2, 80, 45), _lod_render(desc, True, 64, 1, 80, 45),
+                            proven=True)
