@@ -21,7 +21,7 @@ the second because within ``r/2`` of ``p``, ``rho`` is 1-Lipschitz and
 ``|grad D| <= L_D = R A L_n / lambda (sigma_s + 2 (c + R) / r)`` (the slope bound
 above with ``r >= r(p) / 2``). It matters in the noise's margin, between the noisy
 surface and its ``D_max`` envelope, where rays graze. The loop runs over *near* lists
-(support boxes grown by one cell edge ``m``), so ``d >= min(m, min_i d_i)``, and at
+(support boxes grown by ``m``, ``NEAR_REACH`` cell edges), so ``d >= min(m, min_i d_i)``, and at
 least the empty-cell distance; outside the grid, the distance to the box of all
 supports; ``FAR`` above ``value_max``.
 
@@ -52,8 +52,8 @@ instead of Hart's over the falloff's steepest part. The condition is
 in ``delta``, since ``x`` grows as ``u`` falls). With ``a = min(d_k(u0), cap)`` and
 ``b = d_k(u0 - L_T a)``: ``b <= a`` (the lower level's bound is smaller) and, for
 ``delta <= min(b, cap)``, ``u0 - L_T delta >= u0 - L_T a`` so ``F_k < u0 - L_T a <=
-u0 - L_T delta`` in the ball. The minimum over the listed primitives, at most one cell
-edge (a primitive left out of the near list is 0 within it) or the empty-cell
+u0 - L_T delta`` in the ball. The minimum over the listed primitives, at most ``m``
+(a primitive left out of the near list is 0 within it) or the empty-cell
 distance, and at most ``cap < u0 / L_T`` (so the level stays positive and every
 unlisted primitive, 0 there, is below it) is the bound (:func:`slanted_bound`).
 
