@@ -32,14 +32,8 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
 
     sys.path.insert(0, str(REPO / "tests"))
-    from helpers import SCENES, variant  # noqa: E402  (the tests' scene list and variant)
-    from arches_render import tomlfile
-    checks = tomlfile.load(REPO / "golden" / "checks.toml")  # as tests/test_golden_scenes.py
-    width, height = checks["resolution"]
-    shipped = sorted(p.stem for p in SCENES.glob("*.toml"))
-
-    def spp_of(name):
-        return int(checks["spp_of"].get(name, checks["spp"]))
+    from helpers import SCENES, golden_checks, variant  # noqa: E402  (as the golden tests)
+    shipped, (width, height), spp_of = golden_checks()
     variant()
     from arches_render.imaging.golden import load_golden
     from arches_render.imaging.welch import power_check, welch_compare

@@ -10,6 +10,19 @@ REPO = Path(__file__).resolve().parents[1]
 SCENES = REPO / "scenes"
 
 
+def golden_checks():
+    """``(shipped, (width, height), spp_of)``: the shipped scenes with goldens, the
+    resolution of their check renders and ``spp_of(name)``, their samples per pixel
+    (``golden/checks.toml``; read by the golden tests and ``benchmarks/golden_seeds.py``)."""
+    from arches_render import tomlfile
+    checks = tomlfile.load(REPO / "golden" / "checks.toml")
+
+    def spp_of(name: str) -> int:
+        return int(checks["spp_of"].get(name, checks["spp"]))
+
+    return sorted(p.stem for p in SCENES.glob("*.toml")), tuple(checks["resolution"]), spp_of
+
+
 def variant():
     """Select the default variant and register our plugins (once)."""
     from arches_render.render.plugins import ensure_registered

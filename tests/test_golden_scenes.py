@@ -12,21 +12,11 @@ each check: ``golden/checks.toml`` (also read by ``benchmarks/golden_seeds.py``)
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 
-from arches_render import tomlfile
-from helpers import SCENES, variant
+from helpers import SCENES, golden_checks, variant
 
-SHIPPED = sorted(p.stem for p in SCENES.glob("*.toml"))
-CHECKS = tomlfile.load(Path(__file__).resolve().parent.parent / "golden" / "checks.toml")
-WIDTH, HEIGHT = CHECKS["resolution"]
-
-
-def spp_of(name: str) -> int:
-    """Samples per pixel of the check render of golden ``name`` (``golden/checks.toml``)."""
-    return int(CHECKS["spp_of"].get(name, CHECKS["spp"]))
+SHIPPED, (WIDTH, HEIGHT), spp_of = golden_checks()
 
 
 @pytest.mark.parametrize("name", SHIPPED)

@@ -169,24 +169,9 @@ class Sum(Node):
         for i in order:
             child, ask = kids[i], asks[i]
             if i == steep:
-                # Slanted levels (module docstring): the others' values at p, their slope.
-                rest = None
-                for v in values:
-                    rest = v if rest is None else (rest if v is None else rest + v)
-                # Their slope: in the ball of the first slope radius where they bound
-                # it (evaluated above with radii), else globally.
-                slope, reach = 0.0, None
-                for k, other in enumerate(kids):
-                    if k == i:
-                        continue
-                    if radii:
-                        slope, reach = slope + parts[k][0], radii[0]
-                    else:
-                        grow = 1.0 + other.lod_kappa * footprint.rate if footprint is not None else 1.0
-                        slope = slope + other.lipschitz * grow
+                slants = self._slanted_asks(i, values, parts, levels, radii, footprint)
                 ask = tuple(ask or ())
-                fc, dc, sc = child.eval_local(p, ask, direction, footprint, radii,
-                                              slants=tuple((c + rest, slope, reach) for c in levels))
+                fc, dc, sc = child.eval_local(p, ask, direction, footprint, radii, slants=slants)
                 dc, slanted = dc[:len(ask)], dc[len(ask):]
             elif ask is not None or radii:  # (no levels: a culled child still skips far work)
                 fc, dc, sc = eval_local(child, p, tuple(ask or ()), direction, footprint, radii)
@@ -230,6 +215,23 @@ class Sum(Node):
                          for h, c in zip(hart, levels))
         out = tuple(h if d is None else dr.maximum(d, h) for d, h in zip(ds, hart))
         return f, out, tuple((slopes or ())[own:])
+
+    def _slanted_asks(self, steep, values, parts, levels, radii, footprint):
+        """``(c + f_o(p), S, reach)`` for each level ``c``: what the steep operand is asked
+        (module docstring, "Slanted levels"). ``f_o(p)``: the other operands' summed
+        ``values``; ``S``: their slope bound in the ball of the first of ``radii``
+        (``parts``: their slopes for ``radii``), else their global one (``reach`` None)."""
+        others = [k for k in range(len(self.children)) if k != steep]
+        rest = sum((values[k] for k in others), 0.0)
+        if radii:
+            slope, reach = sum((parts[k][0] for k in others), 0.0), radii[0]
+        else:
+            slope, reach = 0.0, None
+            for k in others:
+                other = self.children[k]
+                grow = 1.0 + other.lod_kappa * footprint.rate if footprint is not None else 1.0
+                slope = slope + other.lipschitz * grow
+        return tuple((c + rest, slope, reach) for c in levels)
 
     def _steep_child(self):
         """The operand bounded by slanted levels (module docstring): the one set that

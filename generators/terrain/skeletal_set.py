@@ -99,10 +99,10 @@ SLOPE_REACH = 0.125
 #: loop over) reach beyond a cell, in cell edges: those bounds stop there. Shorter
 #: lists cost less per step and longer ones allow longer steps; over the goblins'
 #: hoodoos (160x90, 8 spp) 1.0 -> 0.5 -> 0.25 -> 0.125 took the near lists from 6.9 to
-#: 4.6 primitives a point and the render from 2.65 to 2.08, 1.93 and 2.02 s (camera
-#: steps 43, 47, 53, 67). At least SLOPE_REACH: the near lists hold the slope lists.
+#: 4.6 and 3.7 primitives a point (1.0, 0.5, 0.25) and the render from 2.65 to 2.08,
+#: 1.93 and 2.02 s (camera steps 43, 47, 53, 67). At least SLOPE_REACH: the near lists
+#: hold the slope lists.
 NEAR_REACH = 0.25
-
 
 
 class SkeletalSet(Node):
@@ -428,16 +428,15 @@ class SkeletalSet(Node):
                 return e, self._falloff(p, k, level=level), ds, ()
             geometry = self._falloff(p, k, True, level)
             out = []
-            for (u0, slope, cap), d in zip(slants, ds[len(us):]):
-                out.append(dr.minimum(d, slanted_bound(self, k, e, geometry, u0, slope, cap, rate)))
             for u, d in zip(us, ds):
                 if carving:
                     out.append(dr.maximum(d, core_bound(self, k, e, geometry, u)))
                     continue
                 acts, bound = level_bound(self, k, e, geometry, u, rate)
                 out.append(dr.select(acts, dr.minimum(d, bound), d))
+            for (u0, slope, cap), d in zip(slants, ds[len(us):]):
+                out.append(dr.minimum(d, slanted_bound(self, k, e, geometry, u0, slope, cap, rate)))
             slopes = tuple(local_slope(self, k, e, geometry, rad, rate) for rad in radii)
-            out = out[len(slants):] + out[:len(slants)]  # levels first, as in ds
             return e, geometry[0], tuple(out), slopes
 
         carving = self.value_max <= 0
