@@ -167,6 +167,20 @@ def test_free_lengths_along_lines_are_free(cone):
     assert np.median(d0[near] / hart[near]) > 3.0
 
 
+def _blend_free_lengths(blend, block, p, rng):
+    """Random unit rays from ``p``: the blend's free lengths, the block's own, and
+    the largest blend value found on those two-sided free segments."""
+    d = rng.normal(size=p.shape)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    _, (dist,) = blend.eval_bounds(_vec(p), (0.0,), _vec(d, mi.Vector3f))
+    _, (own,) = block.eval_bounds(_vec(p), (0.0,), _vec(d, mi.Vector3f))
+    dist, own = dist.numpy().astype(np.float64), own.numpy().astype(np.float64)
+    s = np.linspace(-1.0, 1.0, 65) * 0.999
+    q = (p[None] + (s[:, None, None] * dist[None, :, None]) * d[None]).reshape(-1, 3)
+    fq = evaluate(blend, q).reshape(len(s), len(p))
+    return dist, own, fq[:, dist > 0].max()
+
+
 @pytest.mark.parametrize("z", [50.0, 16.0], ids=["high", "near_ground"])
 def test_blend_caps_free_lengths_next_to_a_saturated_terrain(z):
     """A block blended (radius T) onto the canyon: the terrain is -T in all of its air,
@@ -182,14 +196,35 @@ def test_blend_caps_free_lengths_next_to_a_saturated_terrain(z):
     # Points just outside the block's faces, rays in every direction.
     p = np.array([60.0, 60.0, z]) + rng.uniform(-1, 1, (n, 3)) * [11.5, 6.5, 5.5]
     p = p[evaluate(block, p) < -1e-3][:2000]
-    d = rng.normal(size=p.shape)
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    f, (dist,) = blend.eval_bounds(_vec(p), (0.0,), _vec(d, mi.Vector3f))
-    _, (own,) = block.eval_bounds(_vec(p), (0.0,), _vec(d, mi.Vector3f))
-    dist, own = dist.numpy().astype(np.float64), own.numpy().astype(np.float64)
-    s = np.linspace(-1.0, 1.0, 65) * 0.999
-    q = (p[None] + (s[:, None, None] * dist[None, :, None]) * d[None]).reshape(-1, 3)
-    fq = evaluate(blend, q).reshape(len(s), len(p))
-    assert (dist > 0).mean() > 0.5 and fq[:, dist > 0].max() < INSIDE
+    dist, own, worst = _blend_free_lengths(blend, block, p, rng)
+    assert (dist > 0).mean() > 0.5 and worst < INSIDE
     if z > 30:  # (near the ground the terrain itself is near)
         assert np.median(dist / own) > 0.9
+
+
+def test_blend_caps_free_lengths_of_rays_leaving_a_surface_next_to_a_saturated_terrain():
+    """Shadow and bounce rays start within a hair of a surface. Next to the block's
+    surface (``-0.01 < f < 0``, above the canyon's air, where the terrain is exactly
+    ``-T``) a cap with the other operand only 0.875 k below the level moves the block's
+    level by 0.0042 k, more than the block's own value there, and left these rays
+    Hart's bound with the terrain's slope (the arch bridge's shadow rays: 83 steps a
+    ray); the cap close to 1 gives them the block's own bound. Free lengths are free."""
+    T = CANYON.T_np
+    block = Box([60.0, 60.0, 50.0], [10.0, 5.0, 4.0], rounding=1.0)
+    blend = Blend(CANYON, block, radius=T)
+    rng = np.random.default_rng(22)
+    # Points around the block moved onto its level sets f = -1e-4 .. -1e-2 (Newton
+    # steps along the numerical gradient; the rounded box's field is a distance).
+    p = np.array([60.0, 60.0, 50.0]) + rng.uniform(-1, 1, (2000, 3)) * [12.0, 7.0, 6.0]
+    target = -rng.uniform(1e-4, 1e-2, len(p))
+    h = 1e-3
+    for _ in range(4):
+        g = np.stack([(evaluate(block, p + h * e) - evaluate(block, p - h * e)) / (2 * h)
+                      for e in np.eye(3)], axis=1)
+        p = p - ((evaluate(block, p) - target) / np.maximum((g * g).sum(1), 1e-12))[:, None] * g
+    fb = evaluate(block, p)
+    p = p[(fb < -5e-5) & (fb > -2e-2)]
+    assert len(p) > 1500
+    dist, own, worst = _blend_free_lengths(blend, block, p, rng)
+    assert (dist > 0).mean() > 0.9 and worst < INSIDE
+    assert np.median(dist / own) > 0.9

@@ -366,6 +366,39 @@ def test_sum_carves_and_bounds():
     assert evaluate(CARVE, inside)[0] < -5.0
 
 
+def test_erosion_steps_with_slopes_in_small_balls_next_to_its_walls():
+    """Where the erosion cut into a gentle terrain whose DEM is steep elsewhere (a
+    cliff at one edge sets its global slope), the erosion's bound is Hart's with the
+    slopes of small balls (erosion_node's docstring): free in balls and along lines,
+    and well above Hart's bound with the global slope, where the cell tables alone
+    gave 1.27x (the floating islands' rims: shadow steps 73 -> 45 a ray). (It does
+    not catch a bound that drops the erosion field's slope or ``M_D L_rho``: the
+    terrain's slope bound is loose enough here to cover them; said so that nobody
+    leans on it for those.)"""
+    import drjit as dr
+    import mitsuba as mi
+    x = np.linspace(0.0, 1.0, 33)
+    X, Y = np.meshgrid(x, x)
+    cliff = ImplicitHeightfield(4.0 * np.sin(4 * X) * np.cos(3 * Y) + 30.0 * (X > 0.85), (0, 0, 100, 100), R=8.0)
+    node = Erosion(cliff, EROSION_SET, G.Strata(5.0, 1.5, -0.4))
+    rng = np.random.default_rng(31)
+    p = rng.uniform([10, 10, -20], [80, 90, 20], (400000, 3))
+    v = evaluate(node, p)
+    p = p[(v > -0.5) & (v < -1e-3) & (evaluate(cliff, p) > 0.0)][:3000]
+    assert len(p) > 300
+    for direction in (None, np.array([0.6, -0.7, -0.39]), np.array([0.0, 0.0, 1.0])):
+        if direction is not None:
+            direction = direction / np.linalg.norm(direction)
+        for level in (0.0, 0.3):
+            worst, _ = _free_violation(node, p, level, direction, rng)
+            assert worst < 1e-4, f"level {level}: f + c = {worst:.3g} inside a free region"
+    P = mi.Point3f(*(mi.Float(p[:, i].astype(np.float32)) for i in range(3)))
+    f, (d,) = node.eval_bounds(P, (0.0,))
+    dr.eval(f, d)
+    hart = np.maximum(-f.numpy(), 0.0) / node.lipschitz
+    assert np.median(d.numpy() / hart) > 2.5
+
+
 def _free_violation(node, p, level, direction, rng, k=12):
     """Largest ``f + level`` found in the balls (or two-sided line segments) that
     ``eval_bounds`` declares free of ``{f >= -level}``; and the share of points with a

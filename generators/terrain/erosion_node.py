@@ -17,6 +17,16 @@ field dips below zero. Then:
   ``L = L_f + L_D + M_D L_rho`` with ``M_D`` the erosion field's ``value_max``. The
   same holds in a ball with the erosion field's local bounds
   (:meth:`~.skeletal_set.SkeletalSet.local_lipschitz`), which ``eval_bounds`` uses.
+* Slopes in small balls: in the ball ``B(p, rad)`` the slope is at most
+  ``S_f(rad) + S_D(rad) + M_D(B) L_rho`` with ``S_f``, ``S_D`` the child's and the erosion
+  field's slope bounds in that ball (:func:`~arches_render.field.local_slopes.eval_local`)
+  and ``M_D(B)`` the erosion field's maximum there (its cell table within one cell
+  edge), so ``min(rad, (-f~ - c) / S)`` is a distance bound too. ``eval_bounds`` asks
+  for two radii, the erosion field's ``local_radius`` and an eighth of it, as the
+  sum does: a ray leaving a wall that the erosion cut into a terrain's steep side
+  takes the step of the terrain's slope there, not of the steepest DEM cell anywhere
+  (floating islands, shadow rays off the islands' rims: Hart's bound with ``L = 19``
+  against true gradients of about 1).
 
 References
 ----------
@@ -31,7 +41,7 @@ import drjit as dr
 from arches_render.field.node import Node, hart_bounds
 
 from .geology import ResistanceNode
-from arches_render.field.local_slopes import local_hart, local_lipschitz
+from arches_render.field.local_slopes import eval_local, local_hart, local_lipschitz
 
 
 class Erosion(Node):
@@ -59,10 +69,11 @@ class Erosion(Node):
                              "(value_max): use a skeletal_set")
         self.children = (child, erosion_field, resistance)
 
-    def _erode(self, p, f):
+    def _erode(self, p, f, fd=None):
         # The geology tree is evaluated only where the erosion field is positive
         # (a symbolic branch: packets with no such lane skip it).
-        fd = self.children[1].eval(p)
+        if fd is None:
+            fd = self.children[1].eval(p)
 
         def eroded(p, f, fd):
             return f - fd * (1.0 - dr.clip(self.children[2].eval(p), 0.0, 1.0))
@@ -95,8 +106,15 @@ class Erosion(Node):
         return L, self.value_max, (rD if rf is None else dr.minimum(rf, rD))
 
     def eval_bounds(self, p, levels, direction=None, footprint=None):
-        f, ds = self.children[0].eval_bounds(p, levels, direction, footprint)
-        v = self._erode(p, f)
+        child, field, rho = self.children
+        radii = self.slope_radii if levels else ()
+        f, ds, child_slopes = eval_local(child, p, levels, direction, footprint, radii)
+        if radii:
+            # The erosion field at full detail, as eval has it (same value), with its slopes.
+            fd, _, field_slopes = eval_local(field, p, (), None, None, radii)
+            v = self._erode(p, f, fd)
+        else:
+            v = self._erode(p, f)
         local = self.local_lipschitz(p)
         # The child's footprint field (arches_render.field.lod): slopes grow by 1 + kappa s.
         grow = 1.0 + self.lod_kappa * footprint.rate if footprint is not None and self.lod_kappa else 1.0
@@ -104,7 +122,26 @@ class Erosion(Node):
             hart = hart_bounds(v, levels, self.lipschitz * grow)
         else:
             hart = local_hart(v, levels, local[0] * grow, local[2], self.lipschitz * grow)
+        if radii:
+            # Slopes in the balls of radii (module docstring); the child's already grown.
+            _, M_cell, cell = field.local_lipschitz(p)
+            M_glob = max(float(field.value_max), 0.0)
+            for S_f, S_D, rad in zip(child_slopes, field_slopes, radii):
+                M = dr.select(rad <= cell, dr.maximum(M_cell, 0.0), M_glob)
+                inv = dr.rcp(dr.maximum(S_f + S_D + M * rho.lipschitz, 1e-12))
+                hart = tuple(dr.maximum(h, dr.minimum(dr.maximum(-v - c, 0.0) * inv, rad))
+                             for h, c in zip(hart, levels))
         return v, tuple(dr.maximum(d, h) for d, h in zip(ds, hart))
+
+    @property
+    def slope_radii(self):
+        """Radii of the balls whose slopes bound the steps (module docstring): the
+        erosion field's ``local_radius`` and an eighth of it; ``()`` when the field has
+        no local slopes."""
+        r = getattr(self.children[1], "local_radius", None)
+        if not r or getattr(self.children[1], "local_lipschitz", None) is None:
+            return ()
+        return (float(r), float(r) / 8.0)
 
     def bounds(self):
         return self.children[0].bounds()
