@@ -300,7 +300,8 @@ def test_level_of_detail_image_agrees_with_full_detail():
     16.7 against 18.0 per camera ray, measured). Not proven at this spp: at 64 spp against a
     256-spp full-detail reference the window test fails at the sphere's rim in 2 of 3 seeds
     (rim windows 15-61 % darker; full detail against itself passes): without their sub-pixel
-    bumps grazing rays cover less of a rim pixel. Issue 36, item 4: open."""
+    bumps grazing rays cover less of a rim pixel. Issue 36, item 4: accepted and stated
+    (arches_render.field.lod, "What it does not keep: silhouettes")."""
     import tomllib
 
     from arches_render.scene import parse_scene
@@ -322,3 +323,20 @@ def test_default_scene_level_of_detail_agrees_and_is_deterministic():
     assert np.array_equal(a[0].mean, b[0].mean) and a[1] == b[1]
     _same_image_fewer_steps(_lod_render(desc, False, 256, 2, 80, 45), _lod_render(desc, True, 64, 1, 80, 45),
                             proven=True)
+
+
+def test_render_lod_key_reaches_the_integrator():
+    """``[render] lod`` (default true) switches the integrator's level of detail; a value
+    that is not a boolean is refused with the key named."""
+    import tomllib
+
+    from arches_render.render.renderer import build_scene
+    from arches_render.scene import SceneError, parse_scene
+
+    on = parse_scene(tomllib.loads(MINI), SCENES / "mini.toml")
+    off = parse_scene(tomllib.loads(MINI.replace("spp = 4", "spp = 4\nlod = false")), SCENES / "mini.toml")
+    assert on.render.lod is True and off.render.lod is False
+    assert build_scene(on, "field", 8, 6).integrator().lod is True
+    assert build_scene(off, "field", 8, 6).integrator().lod is False
+    with pytest.raises(SceneError, match="lod"):
+        parse_scene(tomllib.loads(MINI.replace("spp = 4", "spp = 4\nlod = 3")), SCENES / "mini.toml")

@@ -325,7 +325,7 @@ def build_scene(desc, geometry=None, width=None, height=None, voxel=None, progre
     else:
         d["integrator"] = {"type": "implicit_path", "max_depth": s.max_depth, "rr_depth": s.rr_depth,
                            "eps": s.eps, "omega": s.omega, "max_steps": s.max_steps,
-                           "surface_cells": s.surface_cells,
+                           "surface_cells": s.surface_cells, "lod": s.lod,
                            "aovs": bool(aovs), "moments": bool(moments)}
         scene = mi.load_dict(d)
         scene.integrator().attach(desc.field, field_bsdf)

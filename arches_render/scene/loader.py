@@ -17,7 +17,10 @@ A scene file is data, never code. Top-level tables:
                  :mod:`arches_render.render.march`), ``surface_cells`` (trace
                  through the surface cells of :mod:`arches_render.render.cell_tracer`:
                  empty space jumped over, rock seen ahead by shadow rays; default
-                 false)
+                 false), ``lod`` (footprint level of detail: octaves finer than a
+                 ray's cone skipped, :mod:`arches_render.field.lod`; default true;
+                 false renders full detail, e.g. a heavily displaced rim against
+                 the sky, whose coverage level of detail thins)
 ``[camera]``     ``origin``, ``target``, ``up`` (default +Z), ``fov`` (degrees, horizontal)
 ``[cameras.NAME]`` named cameras with the keys of ``[camera]`` (``SceneDescription.cameras``,
                  in file order after ``[camera]``, which is named ``"camera"``); a
@@ -110,6 +113,7 @@ class RenderSettings:
     omega: float = 1.6
     max_steps: int = 512
     surface_cells: bool = False
+    lod: bool = True
 
 
 @dataclass
@@ -441,7 +445,8 @@ def parse_scene(data: dict, path) -> SceneDescription:
         eps=r.number("eps", 2e-4, lo=1e-7, hi=1e-2),
         omega=r.number("omega", 1.6, lo=1.0, hi=1.95),
         max_steps=r.integer("max_steps", 512, lo=16, hi=1 << 16),
-        surface_cells=r.boolean("surface_cells", False))
+        surface_cells=r.boolean("surface_cells", False),
+        lod=r.boolean("lod", True))
     if settings.max_depth == 0:
         raise r.error("max_depth", "must be -1 (unbounded) or an integer in [1, 1024] (got 0)")
     r.finish()
