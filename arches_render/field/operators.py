@@ -67,7 +67,8 @@ from .node import Node, box_intersection, box_union, hart_bounds, opaque_float
 #: where the other operand is below ``-c - CAP_BELOW k``, this one's level moves by
 #: ``CAP_SHIFT k = (1 - sqrt(CAP_BELOW))^2 k``. 0.875 (shift 0.0042 k) serves operands a
 #: little above their saturation; 0.99 (shift 2.5e-5 k) serves rays that leave a surface
-#: next to a saturated operand: arch bridge shadow steps 83 -> 44 a ray (p99 871 -> 253).
+#: next to a saturated operand: arch bridge shadow steps 83 -> 42 a ray (p99 871 -> 229;
+#: 0.99 alone: 44, 253, and camera p99 117 -> 129, which the pair keeps at 114).
 CAP_LEVELS = tuple((below, (1.0 - below ** 0.5) ** 2) for below in (0.875, 0.99))
 
 

@@ -110,7 +110,8 @@ class Erosion(Node):
         radii = self.slope_radii if levels else ()
         f, ds, child_slopes = eval_local(child, p, levels, direction, footprint, radii)
         if radii:
-            # The erosion field at full detail, as eval has it (same value), with its slopes.
+            # The erosion field at full detail, as eval has it (the same value up to the
+            # order of a sum over its primitives), with its slopes.
             fd, _, field_slopes = eval_local(field, p, (), None, None, radii)
             v = self._erode(p, f, fd)
         else:
