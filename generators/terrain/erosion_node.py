@@ -98,10 +98,12 @@ class Erosion(Node):
         ``value_max`` (erosion only removes), or None. ``None`` when the erosion field
         has no local bounds."""
         own = getattr(self.children[1], "local_lipschitz", None)
-        if own is None:
-            return None
+        return None if own is None else self._local_from(p, own(p))
+
+    def _local_from(self, p, field_local):
+        """:meth:`local_lipschitz` from the erosion field's own ``(L_D, M_D, r_D)`` at ``p``."""
         Lf, rf = local_lipschitz(self.children[0], p)
-        LD, MD, rD = own(p)
+        LD, MD, rD = field_local
         L = Lf + LD + MD * self.children[2].lipschitz
         return L, self.value_max, (rD if rf is None else dr.minimum(rf, rD))
 
@@ -116,7 +118,10 @@ class Erosion(Node):
             v = self._erode(p, f, fd)
         else:
             v = self._erode(p, f)
-        local = self.local_lipschitz(p)
+        # The erosion field's cell tables, read once: the local bound and the balls' M_D.
+        own = getattr(field, "local_lipschitz", None)
+        field_local = None if own is None else own(p)
+        local = None if field_local is None else self._local_from(p, field_local)
         # The child's footprint field (arches_render.field.lod): slopes grow by 1 + kappa s.
         grow = 1.0 + self.lod_kappa * footprint.rate if footprint is not None and self.lod_kappa else 1.0
         if local is None:
@@ -125,7 +130,7 @@ class Erosion(Node):
             hart = local_hart(v, levels, local[0] * grow, local[2], self.lipschitz * grow)
         if radii:
             # Slopes in the balls of radii (module docstring); the child's already grown.
-            _, M_cell, cell = field.local_lipschitz(p)
+            _, M_cell, cell = field_local
             M_glob = max(float(field.value_max), 0.0)
             for S_f, S_D, rad in zip(child_slopes, field_slopes, radii):
                 M = dr.select(rad <= cell, dr.maximum(M_cell, 0.0), M_glob)
