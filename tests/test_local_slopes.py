@@ -207,3 +207,40 @@ def test_footprint_field_of_the_terrain_skips_octaves_and_keeps_its_bounds():
     q = p[sel] + dirs * (d[sel, None] * rng.uniform(0, 1, (sel.sum(), 1)) ** (1 / 3) * 0.999)
     assert footprint_field(q).max() < 1e-4
     assert sel.mean() > 0.3
+
+
+def _primitive_gaps(node, p):
+    """``min_i (rho_i(p) - D_max,i)`` over the set's primitives (numpy): how far ``p`` is
+    from the nearest support's outer envelope."""
+    a = np.column_stack([node._ax.numpy(), node._ay.numpy(), node._az.numpy()]).astype(np.float64)
+    ba = np.column_stack([node._bax.numpy(), node._bay.numpy(), node._baz.numpy()]).astype(np.float64)
+    R, core = node._R.numpy().astype(np.float64), node._core.numpy().astype(np.float64)
+    span = node.noise["span"] if node.noise else 0.0
+    pa = p[:, None, :] - a[None]
+    L2 = np.maximum(np.sum(ba * ba, axis=1), 1e-30)
+    t = np.clip(np.sum(pa * ba[None], axis=2) / L2, 0.0, 1.0)
+    r = np.linalg.norm(pa - t[..., None] * ba[None], axis=2)
+    return np.min(np.maximum(r - core, 0.0) - R * (1.0 + span), axis=1)
+
+
+def test_balls_that_miss_every_support_have_no_slope_from_the_set():
+    """The set's local slope in a ball that reaches no primitive's support is 0: a
+    primitive of the point's slope list counts only if the ball can touch its support
+    (it used to count as if it did: a Jacksboro channel wall summed 14 against the one
+    acting primitive's 4.75)."""
+    radii = CARVED.slope_radii
+    p = np.random.default_rng(8).uniform(LO, HI, (20000, 3))
+    gap = _primitive_gaps(TUNNELS, p)
+    _, _, slopes = eval_local(TUNNELS, _vec(p), (0.0,), None, None, radii)
+    dr.eval(slopes)
+    # (Outside the set's grid a ball that reaches the supports' box takes the global
+    # slope: not asked here.)
+    inside = np.broadcast_to(TUNNELS._cell(_vec(p))[3].numpy(), (len(p),))
+    for S, rad in zip(slopes, radii):
+        S = np.broadcast_to(S.numpy(), (len(p),))
+        missed = inside & (gap > rad * (1.0 + 1e-4) + 1e-3)
+        # Points in cells whose lists hold primitives (the cell tables' slope > 0):
+        # where the old bound summed them.
+        listed = missed & (np.broadcast_to(TUNNELS.local_lipschitz(_vec(p))[0].numpy(), (len(p),)) > 0)
+        assert listed.sum() > 200, f"radius {rad:.3g}: too few test points"
+        assert np.all(S[missed] == 0.0), f"radius {rad:.3g}: {np.sum(S[missed] > 0)} balls missing every support"

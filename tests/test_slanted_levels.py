@@ -105,8 +105,11 @@ def test_slanted_bounds_beat_hart_near_the_walls(monkeypatch):
     _, with_slants = _bounds(p)
     _, without = _bounds(p, slants=False, monkeypatch=monkeypatch)
     assert np.all(with_slants >= without)
-    # Measured on these points: median ratio 1.73, 38 % of them at least 2x (the
-    # goblins' hoodoos, steeper against their terrain: bounce steps 90 -> 41).
+    # Measured on these points: median ratio 1.66, 24 % of them at least 2x (the
+    # goblins' hoodoos, steeper against their terrain: bounce steps 90 -> 41). The
+    # baseline (Hart's bound with the local slopes) tightened when a ball that misses
+    # a primitive's support stopped counting that primitive's slope: 38 % were at
+    # least 2x before, median 1.73.
     ratio = with_slants / np.maximum(without, 1e-9)
     assert np.median(ratio) > 1.4
-    assert np.mean(ratio > 2.0) > 0.3
+    assert np.mean(ratio > 2.0) > 0.2

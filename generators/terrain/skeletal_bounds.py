@@ -35,7 +35,8 @@ below 1, and a path from ``p`` into the support enters it at ``d~ = 1``. Hence
 
     |grad F| <= sum_i |e_i| L_i max { |g'(u)| : u in [x_i - rad L_i, x_i + rad L_i] }
 
-in the ball (curves: their members' maximum; ``"max"`` sets: the maximum), where
+in the ball (curves: their members' maximum; ``"max"`` sets: the maximum; 0 from a primitive
+whose support the ball misses, ``rho(p) - rad > D_max``), where
 ``|g'(u)| = 6 u (1 - u^2)^2`` rises to ``G_SLOPE`` at ``u = 1/sqrt 5`` and falls to 0 at 1
 (:func:`.falloff.falloff_slope_max`). Where the noise is skipped (``rho >= D_max``)
 ``x = 1`` is exact too. A footprint multiplies ``L_i`` by ``1 + kappa s``.
@@ -144,7 +145,14 @@ def local_slope(node, k, e, geometry, radius, rate=None):
     # d~ at p (D is exact where the noise was evaluated; D_max elsewhere, where
     # rho >= D_max and the clamp to 1 makes it exact too).
     x = dr.minimum(rho * dr.rcp(dr.maximum(D, 1e-30)), 1.0)
-    return dr.abs(e) * falloff_slope_max(x - radius * Ld, x + radius * Ld) * Ld
+    slope = dr.abs(e) * falloff_slope_max(x - radius * Ld, x + radius * Ld) * Ld
+    # A ball that misses the support (rho 1-Lipschitz: rho > D_max in all of it) has
+    # slope 0 from this primitive. Without this, every primitive of a cell's slope list
+    # counted as if the ball touched its support: a Jacksboro channel wall summed
+    # 14 against the one acting primitive's 4.75.
+    R = dr.gather(mi.Float, node._R, k)
+    D_max = R * node._reach if node.noise else R
+    return dr.select(rho - radius > D_max, 0.0, slope)
 
 
 def footprint_error(node, radius):
