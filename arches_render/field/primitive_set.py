@@ -22,10 +22,10 @@ capsules at any count (a dense grid capped at 64^3 cells held 174 capsules a cel
 a million); capsules are sorted by cell and packed in 32-byte records.
 
 Empty space: a distance transform of the occupied cells gives, for each cell, the
-distance ``k`` (in cells, centre to centre) to the nearest cell holding a primitive
-of its own; every primitive point lies in such a cell, so from any ``p`` in the
-cell the set is at least ``(k - sqrt(3)) * cell`` away (per brick on large grids,
-see :mod:`~arches_render.field.brick_grid`). ``eval_bounds`` returns the larger of
+gap (box to box) to the nearest cell holding a primitive of its own
+(:func:`~arches_render.field.brick_grid.cell_gaps`); every primitive point lies in
+such a cell, so from any ``p`` in the cell the set is at least that far away (per
+brick on large grids, see :mod:`~arches_render.field.brick_grid`). ``eval_bounds`` returns the larger of
 that and ``-f``, so rays cross sparse sets in strides longer than ``m``.
 
 Spheres are capsules with ``a = b``.
@@ -46,7 +46,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .brick_grid import BRICK, MAX_BRICKS, BrickGrid, cell_ranges
+from .brick_grid import BRICK, MAX_BRICKS, BrickGrid, cell_gaps, cell_ranges
 from .node import Node, box_distance, opaque_float
 
 #: Floats a capsule takes in the record array (a, b, r, padding to 32 bytes).
@@ -75,15 +75,14 @@ def grid_lists(lo_boxes, hi_boxes, grid_lo, cell, res):
 
 
 def empty_distance(lo_boxes, hi_boxes, grid_lo, cell, res):
-    """Per cell, a lower bound of the distance from any of its points to the set."""
-    from scipy.ndimage import distance_transform_edt  # on use: keeps `import arches_render.field` light
+    """Per cell, a lower bound of the distance from any of its points to the set: the
+    gap to the nearest cell a box touches (:func:`.brick_grid.cell_gaps`)."""
     i0 = np.clip(np.floor((lo_boxes - grid_lo) / cell).astype(np.int64), 0, res - 1)
     i1 = np.clip(np.floor((hi_boxes - grid_lo) / cell).astype(np.int64), 0, res - 1)
     occupied = np.zeros(tuple(res[::-1]), dtype=bool)  # (z, y, x) to match the cell index
     for (x0, y0, z0), (x1, y1, z1) in zip(i0, i1):
         occupied[z0:z1 + 1, y0:y1 + 1, x0:x1 + 1] = True
-    k = distance_transform_edt(~occupied)
-    return np.maximum((k - np.sqrt(3.0)) * cell, 0.0).ravel()
+    return (cell_gaps(occupied) * cell).ravel()
 
 
 class CapsuleSet(Node):
