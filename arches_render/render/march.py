@@ -33,8 +33,8 @@ every second step failed wherever ``g / K > 1/4`` (a Jacksboro channel wall: ``g
 point takes ``omega = 0.9 * 2 / (1 - beta)`` in ``[1, omega0]``, ``beta`` measured between
 the last two verified points (Bálint and Valasek 2018 predict the step from the same
 planar model). It changes only where the ray goes next: the overlap test still
-decides what is verified (camera steps: Jacksboro 41.8 -> 36.4, NM canyon 32.4 ->
-27.5, goblins 53.1 -> 49.0, every_generator 27.2 -> 24.8).
+decides what is verified (camera steps, 320x180: Jacksboro 42.0 -> 36.6, NM canyon
+34.2 -> 29.7, goblins 53.1 -> 49.0, every_generator 27.2 -> 24.8).
 
 Steps stop at ``t_end``, so that a relaxed step past the end is still checked there
 before the ray may leave (else it could skip a surface just before a mesh).
