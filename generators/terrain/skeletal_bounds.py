@@ -41,6 +41,14 @@ whose support the ball misses, ``rho(p) - rad > D_max``), where
 (:func:`.falloff.falloff_slope_max`). Where the noise is skipped (``rho >= D_max``)
 ``x = 1`` is exact too. A footprint multiplies ``L_i`` by ``1 + kappa s``.
 
+Along a line (noise-free sets, a ray's direction ``u`` given). ``d~ = rho / R`` and ``rho``
+(the distance to the segment less the core) has gradient ``grad r``, a unit vector
+whose change is bounded by the distance's curvature, ``|Hess r| <= 1 / r`` (the distance
+to a convex set). On the line ``p + s u``, ``|s| <= rad < r(p)``, ``r >= r(p) - rad``, so
+``|d/ds d~| <= (|grad r(p) . u| + rad / (r(p) - rad)) / R``, at most ``1 / R``; that factor
+replaces ``L_i`` above. A ray that runs along a channel wall (a shadow ray leaving
+a river bank) sees the carving change little, and steps by the terrain's slope.
+
 Slanted levels (a set summed with a smooth operand, :class:`.operators.Sum`). Where
 a terrain ``f_T`` has a small slope bound ``L_T`` and the set adds steep matter on it
 (the goblins' hoodoos: ``e = 40`` over ``R`` of 0.6-8 m, ``|grad F|`` bounded by
@@ -91,7 +99,7 @@ def level_bound(node, k, e, geometry, u, rate=None):
     """Lower bound of the distance from ``p`` to ``{F_k >= u}`` (``u > 0``), or
     ``None`` where primitive ``k`` cannot reach ``u`` (module docstring, "Distance
     bounds"): returns ``(acts, bound)``."""
-    _, rho, r, D = geometry
+    _, rho, r, D, *_ = geometry
     if node.combine == "max":
         x = dr.sqrt(dr.maximum(1.0 - dr.cbrt(dr.minimum(u / dr.maximum(e, 1e-30), 1.0)), 0.0))
         acts = e >= u
@@ -129,7 +137,7 @@ def core_bound(node, k, e, geometry, u):
     """Carving sets (every ``e <= 0``): a lower bound of the distance from ``p`` to
     ``{F >= u}`` (``u < 0``) from primitive ``k`` alone (module docstring, "Cores"):
     ``x D_min - rho`` with ``x = sqrt(1 - (u / e)^(1/3))``, 0 where ``|e| <= |u|``."""
-    _, rho, _, _ = geometry
+    _, rho, *_ = geometry
     x = dr.sqrt(dr.maximum(1.0 - dr.cbrt(dr.minimum(u * dr.rcp(dr.minimum(e, -1e-30)), 1.0)), 0.0))
     return dr.maximum(x * dr.gather(mi.Float, node._Dmin, k) - rho, 0.0)
 
@@ -137,9 +145,14 @@ def core_bound(node, k, e, geometry, u):
 def local_slope(node, k, e, geometry, radius, rate=None):
     """Bound of ``|grad F_k|`` in the ball of radius ``radius`` around ``p``
     (module docstring, "Local slopes"): ``|e| max |g'| L_k`` over the star
-    distances the ball can hold."""
-    _, rho, _, D = geometry
+    distances the ball can hold; with the line's ``along`` in ``geometry`` (noise-free
+    sets), of the derivative along the line within ``radius`` ("Along a line")."""
+    _, rho, r, D, *along = geometry
     Ld = dr.gather(mi.Float, node._Ld, k)
+    if along:
+        # |grad r . u| moves by at most |q - p| / (r(p) - |q - p|) along the line.
+        turn = dr.select(r > 2.0 * radius, radius * dr.rcp(dr.maximum(r - radius, 1e-30)), 1.0)
+        Ld = Ld * dr.minimum(along[0] + turn, 1.0)
     if rate is not None:
         Ld = Ld * (1.0 + node.lod_kappa * rate)
     # d~ at p (D is exact where the noise was evaluated; D_max elsewhere, where

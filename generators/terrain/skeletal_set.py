@@ -361,10 +361,11 @@ class SkeletalSet(Node):
         cell, stored, brick = self.layout.lookup(p)
         return cell, stored, brick, inside
 
-    def _falloff(self, p, k, geometry=False, level=None):
+    def _falloff(self, p, k, geometry=False, level=None, direction=None):
         """``g(d~)`` of primitive ``k`` at ``p`` (a value in [0, 1]); with ``geometry``,
         ``(g, rho, r, D)``: also ``rho = max(r - c, 0)``, the distance ``r`` to the
-        skeleton and the star radius ``D(p)`` (``D_max`` where the noise is skipped).
+        skeleton and the star radius ``D(p)`` (``D_max`` where the noise is skipped),
+        and with a ``direction`` ``u`` (noise-free sets) ``|grad r . u|`` after them.
         ``level``: the star noise's footprint level (``None``: every octave)."""
         a = mi.Point3f(dr.gather(mi.Float, self._ax, k), dr.gather(mi.Float, self._ay, k),
                        dr.gather(mi.Float, self._az, k))
@@ -380,7 +381,11 @@ class SkeletalSet(Node):
         rho = dr.maximum(r - core, 0.0)
         if not self.noise:
             g = g_dr(dr.square(rho / R))
-            return (g, rho, r, R) if geometry else g
+            if not geometry:
+                return g
+            if direction is None:
+                return g, rho, r, R
+            return g, rho, r, R, dr.abs(dr.dot(off, direction)) * dr.rcp(dr.maximum(r, 1e-30))
 
         def noisy(rho, R, core, s, off, r, k, *lvl):
             u = off / dr.maximum(r, 1e-12)
@@ -402,7 +407,7 @@ class SkeletalSet(Node):
         """Combined field ``F(p)`` (before the threshold) as ``mi.Float``."""
         return self._accumulate(p, (self._start, self._count, self._index))[0]
 
-    def _accumulate(self, p, lists, us=(), footprint=None, radii=(), slants=()):
+    def _accumulate(self, p, lists, us=(), footprint=None, radii=(), slants=(), direction=None):
         """``(F(p), ds, slopes)``: the field over the cell lists ``lists`` (CSR ``start,
         count, index``); for each ``u`` of ``us``, the smallest :func:`.skeletal_bounds.level_bound` over
         them (``FAR`` where none acts) or, for a carving set (no positive energy), the
@@ -410,11 +415,14 @@ class SkeletalSet(Node):
         bound of :func:`.skeletal_bounds.local_slope` summed over the listed primitives (one member
         per curve: their maximum); for each ``(u0, slope, cap)`` of ``slants``, the smallest
         :func:`.skeletal_bounds.slanted_bound` (after the levels' bounds in ``ds``).
+        With a ray's ``direction``, slopes along its line where the set has no noise.
         Primitives listed but not touching ``p`` add exactly 0, so the near lists give
         the same ``F`` as the cell lists. With a ``footprint``, the footprint field
         (star noise truncated)."""
         level = self._lod.level(footprint) if self.noise else None
         rate = footprint.rate if level is not None else None
+        # Slopes along the ray's line (skeletal_bounds, "Along a line"): noise-free sets.
+        along = direction if radii and direction is not None and not self.noise else None
         start_a, count_a, index_a = lists
         cell, stored, _, inside = self._cell(p)
         start = dr.gather(mi.UInt32, start_a, cell, stored)
@@ -426,7 +434,7 @@ class SkeletalSet(Node):
             e = dr.gather(mi.Float, self._e, k)
             if not n_u and not radii:
                 return e, self._falloff(p, k, level=level), ds, ()
-            geometry = self._falloff(p, k, True, level)
+            geometry = self._falloff(p, k, True, level, along)
             out = []
             for u, d in zip(us, ds):
                 if carving:
@@ -532,7 +540,7 @@ class SkeletalSet(Node):
             # Caps need the near lists (a superset of the slope lists); cores need
             # only the primitives whose support holds p.
             lists = self._near if self._near is not None else self._slope_lists
-            F, geo, slopes = self._accumulate(p, lists, us, footprint, radii, slants)
+            F, geo, slopes = self._accumulate(p, lists, us, footprint, radii, slants, direction)
             f = F - self._threshold
         elif footprint is not None:
             f = self._accumulate(p, (self._start, self._count, self._index), (), footprint)[0] - self._threshold
