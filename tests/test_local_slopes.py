@@ -267,41 +267,56 @@ CHANNELS = _channels(TERRAIN)
 CUT = Sum(TERRAIN, CHANNELS)
 
 
-def test_slopes_along_a_line_hold_on_it_and_beat_the_balls():
-    """Noise-free sets bound the derivative along a ray's line (:mod:`.skeletal_bounds`,
-    "Along a line"): for pairs on the line within each radius, ``|f(q1) - f(q2)| <= S
-    |q1 - q2|``; lines that run along a channel's wall get slopes well below the
-    ball's. It fails if the bound drops the turning of ``grad r`` along the line."""
+def _line_points(name, rng):
+    """Points and line directions for :func:`test_slopes_along_a_line_hold_on_it`: around
+    the channels' segments (half the lines along their channel, within ~10 degrees), or
+    near the carved terrain's surface (half the lines within 20 degrees of horizontal)."""
+    if name == "channels":
+        a, b = CHANNELS.a_np, CHANNELS.b_np
+        k = rng.integers(0, len(a), 3000)
+        p = a[k] + rng.uniform(0, 1, (len(k), 1)) * (b[k] - a[k]) + rng.normal(0, 4.0, (len(k), 3))
+        acts = np.abs(evaluate(CHANNELS, p)) > 0.05  # where they act
+        p, k = p[acts][:1000], k[acts][:1000]
+        u = rng.normal(size=p.shape)
+        u[::2] = (b[k] - a[k])[::2] / np.linalg.norm((b[k] - a[k])[::2], axis=1, keepdims=True) + 0.1 * u[::2]
+    else:
+        p = _near_surface_points(CUT, 1000, seed=13)
+        u = rng.normal(size=p.shape)
+        u[::2, 2] = rng.uniform(-0.35, 0.35, len(u[::2])) * np.linalg.norm(u[::2, :2], axis=1)
+    return p, u / np.linalg.norm(u, axis=1, keepdims=True)
+
+
+@pytest.mark.parametrize("name", ["channels", "terrain", "cut"])
+def test_slopes_along_a_line_hold_on_it(name):
+    """With a ray's direction the slopes bound the derivative along its line (noise-free
+    skeletal sets, :mod:`.skeletal_bounds` "Along a line"; the implicit heightfield, from
+    :mod:`.elevation_line`'s derivative terms): for pairs on the line within each
+    radius, ``|f(q1) - f(q2)| <= S |q1 - q2|``, and ``S`` is at most the ball's. Lines
+    along a channel, or climbing gently above the ground, get slopes well below the
+    ball's. It fails if the set's bound drops the turning of ``grad r`` along the line."""
+    node = {"channels": CHANNELS, "terrain": TERRAIN, "cut": CUT}[name]
     radii = CUT.slope_radii
-    # Points around the channels' segments, where they act (and some beyond).
     rng = np.random.default_rng(6)
-    a, b = CHANNELS.a_np, CHANNELS.b_np
-    k = rng.integers(0, len(a), 3000)
-    p = a[k] + rng.uniform(0, 1, (len(k), 1)) * (b[k] - a[k]) + rng.normal(0, 4.0, (len(k), 3))
-    acts = np.abs(evaluate(CHANNELS, p)) > 0.05
-    p, k = p[acts][:1000], k[acts][:1000]
+    p, u = _line_points(name, rng)
     assert len(p) > 500
-    # Half the lines run along their channel (within ~10 degrees), half anywhere.
-    u = rng.normal(size=p.shape)
-    u[::2] = (b[k] - a[k])[::2] / np.linalg.norm((b[k] - a[k])[::2], axis=1, keepdims=True) + 0.1 * u[::2]
-    u /= np.linalg.norm(u, axis=1, keepdims=True)
-    _, _, along = eval_local(CHANNELS, _vec(p), (0.0,), _vec(u, mi.Vector3f), None, radii)
-    _, _, balls = eval_local(CHANNELS, _vec(p), (0.0,), None, None, radii)
+    _, _, along = eval_local(node, _vec(p), (0.0,), _vec(u, mi.Vector3f), None, radii)
+    _, _, balls = eval_local(node, _vec(p), (0.0,), None, None, radii)
     dr.eval(along, balls)
     for S, B, rad in zip(along, balls, radii):
         S, B = (np.broadcast_to(x.numpy(), (len(p),)).astype(np.float64) for x in (S, B))
-        assert np.all(S <= B * (1 + 1e-6) + 1e-9)
+        assert np.all(S <= B * (1 + 1e-5) + 1e-9)
         s1 = rng.uniform(-1, 1, (len(p), 16)) * rad * 0.999
         s2 = np.clip(s1 + rng.normal(0, 0.02 * rad, s1.shape), -rad * 0.999, rad * 0.999)
-        f1 = evaluate(CHANNELS, (p[:, None] + s1[..., None] * u[:, None]).reshape(-1, 3)).reshape(s1.shape)
-        f2 = evaluate(CHANNELS, (p[:, None] + s2[..., None] * u[:, None]).reshape(-1, 3)).reshape(s1.shape)
+        f1 = evaluate(node, (p[:, None] + s1[..., None] * u[:, None]).reshape(-1, 3)).reshape(s1.shape)
+        f2 = evaluate(node, (p[:, None] + s2[..., None] * u[:, None]).reshape(-1, 3)).reshape(s1.shape)
         gap = np.maximum(np.abs(s1 - s2), 1e-9)
         # float32 evaluation noise: a few ulps of |f| (up to 43 deep in a channel) over the
         # pair's distance; pairs closer than 1e-3 rad measure only that noise.
         excess = np.abs(f1 - f2) / gap - S[:, None] - (2e-5 + 2e-6 * np.abs(f1)) / gap
         excess[gap < 1e-3 * rad] = -np.inf
         assert excess.max() <= 1e-3 * B.max(), f"radius {rad:.3g}: a line's slope exceeds its bound"
-    # Lines along a channel, the smaller radius (the larger one, 1.26 m against radii of
-    # 3-6 m, turns too much): measured median along / ball 0.22.
+    # The chosen half of the lines, the smaller radius (the larger, 1.26 m against
+    # channel radii of 3-6 m, turns too much): median along / ball measured 0.22 for
+    # the channels, 0.38 for the terrain and the carved terrain.
     S, B = (np.broadcast_to(x.numpy(), (len(p),))[::2] for x in (along[1], balls[1]))
-    assert np.median(S[B > 0] / B[B > 0]) < 0.4
+    assert np.median(S[B > 0] / B[B > 0]) < (0.4 if name == "channels" else 0.6)

@@ -519,22 +519,23 @@ def test_grazing_rays_resolve_and_hit_where_the_field_does():
 
 def test_a_ray_that_spends_both_budgets_is_unresolved_and_a_hit():
     """The tracer's contract for the rays the budgets cannot resolve: flagged ``unresolved`` and
-    reported as a hit at their last point, never as a silent miss (with 2 + 32 steps, most of the
-    grazing rays). The ``no ray unresolved`` checks above rely on the flag."""
+    reported as a hit at their last point, never as a silent miss (with 1 + 16 steps, most of the
+    grazing rays: 2 + 32 left only 49 % unresolved once slopes along the ray's line came in).
+    The ``no ray unresolved`` checks above rely on the flag."""
     import drjit as dr
     import mitsuba as mi
 
     from arches_render.render.march import SECOND_PASS_FACTOR
     from arches_render.render.sphere_tracer import SphereTracer
     o, d = _grazing_rays()
-    tracer = SphereTracer(SCULPTED, max_steps=2)
+    tracer = SphereTracer(SCULPTED, max_steps=1)
     r = tracer.query(mi.Point3f(*(mi.Float(o[:, i]) for i in range(3))),
                      mi.Vector3f(*(mi.Float(d[:, i]) for i in range(3))), mi.Float(1e4), mi.Bool(True))
     dr.eval(r.hit, r.steps, r.exhausted, r.unresolved)
     unresolved, steps = r.unresolved.numpy(), r.steps.numpy()
     assert unresolved.mean() > 0.5, unresolved.mean()
     assert r.hit.numpy()[unresolved].all() and r.exhausted.numpy()[unresolved].all()
-    assert np.all(steps[unresolved] == 2 * (1 + SECOND_PASS_FACTOR))
+    assert np.all(steps[unresolved] == 1 * (1 + SECOND_PASS_FACTOR))
 
 
 def test_same_seed_same_field_other_seed_differs():

@@ -141,9 +141,10 @@ class ElevationLineBound:
         self.band = (float(amp["border"]) - self.cell, float(amp["border"] + amp["taper"]) + self.cell)
         self.lac_over_log = lac / self.lod.log_l
 
-    def free_lengths(self, p, u, v, k, shifts, a0, level, footprint):
+    def free_lengths(self, p, u, v, k, shifts, a0, level, footprint, terms=None):
         """Two-sided free lengths of the line through the point with ``v = h - z`` along
-        ``u``, to each level ``{v >= -shift}``.
+        ``u``, to each level ``{v >= -shift}`` (``terms``: :meth:`derivative_terms` of
+        the same arguments, if already computed).
 
         Parameters
         ----------
@@ -169,6 +170,23 @@ class ElevationLineBound:
         -------
         list of mi.Float
         """
+        B0, B1, K, rho = terms if terms is not None else self.derivative_terms(p, u, k, a0, level, footprint)
+        s1 = (B1 - B0) * dr.rcp(K)
+        G1 = s1 * (B0 + 0.5 * K * s1)
+        out = []
+        for shift in shifts:
+            gap = dr.maximum(-v - shift, 0.0)
+            quad = 2.0 * gap * dr.rcp(B0 + dr.sqrt(dr.square(B0) + 2.0 * K * gap))
+            lin = s1 + (gap - G1) * dr.rcp(dr.maximum(B1, 1e-30))
+            d = dr.select(gap <= G1, quad, lin)
+            # (A NaN proves nothing: keep it, the march treats it as such.)
+            out.append(dr.minimum(d, rho))
+        return out
+
+    def derivative_terms(self, p, u, k, a0, level, footprint):
+        """``(B0, B1, K, rho)`` of the module docstring: on the line through ``p`` along
+        ``u``, ``|dv/ds| <= min(B0 + K |s|, B1)`` for ``|s| <= rho`` (arguments as
+        :meth:`free_lengths`)."""
         run = dr.sqrt(dr.square(u.x) + dr.square(u.y))
         xlo, xhi, ylo, yhi = (dr.gather(mi.Float, r, k) for r in self._ranges)
         h_lo = dr.minimum(u.x * xlo, u.x * xhi) + dr.minimum(u.y * ylo, u.y * yhi)
@@ -202,16 +220,5 @@ class ElevationLineBound:
         B0 = dr.maximum(h_hi + centre + slack, -(h_lo + centre - slack))
         B1 = dr.maximum(h_hi - u.z + first, -(h_lo - u.z - first))
         B0 = dr.minimum(B0, B1)
-        K = dr.maximum(K, 1e-30)
-        s1 = (B1 - B0) * dr.rcp(K)
-        G1 = s1 * (B0 + 0.5 * K * s1)
-        out = []
-        for shift in shifts:
-            gap = dr.maximum(-v - shift, 0.0)
-            quad = 2.0 * gap * dr.rcp(B0 + dr.sqrt(dr.square(B0) + 2.0 * K * gap))
-            lin = s1 + (gap - G1) * dr.rcp(dr.maximum(B1, 1e-30))
-            d = dr.select(gap <= G1, quad, lin)
-            # (A NaN proves nothing: keep it, the march treats it as such.)
-            out.append(dr.minimum(d, rho))
-        return out
+        return B0, B1, dr.maximum(K, 1e-30), rho
 

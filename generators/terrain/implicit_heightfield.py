@@ -65,7 +65,11 @@ high in the air has slope 0. Where ``rad`` is at most a DEM cell the ball's
 footprint lies in the 3x3 cells around ``p``'s, and ``L_h`` uses their largest
 bilinear slope (plus the elevation primitives' and the fBm's) instead of the DEM's
 steepest cell anywhere. ``|grad f_P| <= (2T/R) max |g'|`` over ``d(q, P) / R`` in
-``[(d - rad)/R, (d + rad)/R]``, and ``|grad f| <= max`` of the two.
+``[(d - rad)/R, (d + rad)/R]``, and ``|grad f| <= max`` of the two. Given a ray's
+direction, the slope along its line replaces ``L_h`` where ``rad`` is within the line
+bound's reach: ``|dv/ds| <= min(B0 + K rad, B1)`` (:mod:`.elevation_line`), the rate
+the ray climbs over the ground rather than the ground's steepest slope (Jacksboro
+shadow steps 36 -> 28 a ray).
 
 Footprint level of detail (:mod:`arches_render.field.lod`): with a ray's footprint
 the fBm keeps the octaves the cone resolves (:class:`~arches_render.field.lod.OctaveLOD`);
@@ -256,10 +260,12 @@ class ImplicitHeightfield(Heightfield):
     def eval_bounds(self, p, levels, direction=None, footprint=None):
         return self.eval_local(p, levels, direction, footprint)[:2]
 
-    def local_slopes(self, v, d_prism, k, radii, grow=1.0):
+    def local_slopes(self, v, d_prism, k, radii, grow=1.0, line=None):
         """Bounds of ``|grad f|`` in the balls of radii ``radii`` around a point of DEM
         cell ``k`` where ``v = h - z`` and ``d(p, P) = d_prism`` (module docstring,
-        "Local slopes"); ``grow``: ``1 + kappa s`` of a footprint field."""
+        "Local slopes"); ``grow``: ``1 + kappa s`` of a footprint field. With ``line``,
+        the :meth:`.ElevationLineBound.derivative_terms` of a ray's line: bounds of the
+        derivative along it where the radius lies within their reach."""
         S_near = dr.gather(mi.Float, self._near_slope, k) + self.extra_slope_np
         c = 6.0 * self.T_np / self.R_np - 3.0
         peak = (c - 1.0) / (2.0 * c) if c > 0.0 else 0.0  # of s'(u) = (1 - u)(1 + c u)
@@ -269,6 +275,11 @@ class ImplicitHeightfield(Heightfield):
             # (rad may be a per-lane radius: a tracer's adaptive ball.)
             S = dr.select(rad <= self.cell_np, S_near, self.slope_bound)
             Lh = dr.sqrt(1.0 + S * S) * (1.0 + 1e-6) * grow
+            if line is not None:
+                # Along the line |dv/ds| <= min(B0 + K |s|, B1) within rho (the footprint
+                # field's, grown already): the rate a ray climbs, not the ground's steepest.
+                B0, B1, K, reach = line
+                Lh = dr.select(rad <= reach, dr.minimum(dr.minimum(B0 + K * rad, B1) * (1.0 + 1e-6), Lh), Lh)
             lo, hi = v - rad * Lh, v + rad * Lh
             ua = dr.select((lo <= 0.0) & (hi >= 0.0), 0.0, dr.minimum(dr.abs(lo), dr.abs(hi))) * self._inv_R
             ub = dr.maximum(dr.abs(lo), dr.abs(hi)) * self._inv_R
@@ -303,9 +314,12 @@ class ImplicitHeightfield(Heightfield):
         # Below the surface (c < 0, asked by the sum's caps) s(v) >= -c > 0 only
         # gives v >= -c / S_SIGMA.
         shifts = [c * dr.select(mi.Bool(c >= 0.0), self._inv_k, self._inv_S) for c in levels]
+        terms = None
+        if direction is not None and (levels or radii):
+            terms = self._line.derivative_terms(p, direction, k, a0, level, footprint)
         if direction is not None and levels:
             # Along the ray: second-order bounds of v on the ray's own line.
-            lines = self._line.free_lengths(p, direction, v, k, shifts, a0, level, footprint)
+            lines = self._line.free_lengths(p, direction, v, k, shifts, a0, level, footprint, terms)
         ds = []
         for i, (c, shift) in enumerate(zip(levels, shifts)):
             dT = dr.maximum(-v - shift, 0.0) * self._inv_Lh * (1.0 / grow)
@@ -321,7 +335,7 @@ class ImplicitHeightfield(Heightfield):
             rc = self._R * dr.sqrt(dr.maximum(1.0 - dr.cbrt(wc), 0.0))
             d = dr.maximum(dT, dr.maximum(dP - rc, 0.0))
             ds.append(dr.select(c >= self._T, 0.0, d))
-        return f, tuple(ds), self.local_slopes(v, dP, k, radii, grow)
+        return f, tuple(ds), self.local_slopes(v, dP, k, radii, grow, terms)
 
     def bounds(self):
         r0 = R0_FACTOR * self.R_np
