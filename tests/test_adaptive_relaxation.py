@@ -54,8 +54,10 @@ def test_relaxed_marches_take_fewer_steps_than_plain_ones_at_a_loose_bound():
     hit1, t1, plain = _march(1.0)
     hit, t, relaxed = _march(1.6)
     assert hit1.all() and hit.all()
-    # Same surface: both stop within the tolerance band (-f < eps t, f's slope 1).
-    assert np.allclose(t, t1, atol=2e-5 * 60.0 + 1e-4)
+    # Same surface: each march stops somewhere in the hit band -f < eps t (eps 1e-5, t at
+    # most 60 m: 6e-4 m of depth, f's slope being 1), so two marches may differ by up to
+    # two band depths (1.2e-3 m; measured 2.4e-4) plus float32 rounding of t (1e-4 m).
+    assert np.allclose(t, t1, atol=2 * 1e-5 * 60.0 + 1e-4)
     # Measured: 0.85x the plain march's evaluations (12.2 against 14.4 a ray; the fixed
     # 1.6 took 27.8, 1.93x).
     assert relaxed.mean() < 0.9 * plain.mean(), (relaxed.mean(), plain.mean())

@@ -16,11 +16,11 @@ by a counting sort, :mod:`.brick_grid_kernels`).
 
 Empty space. For each stored cell, a lower bound of the distance from its points
 to the primitives' boxes: the gap, box to box, between the cell and the nearest cell
-a box touches (:func:`cell_gaps`); for an unstored brick, the same at brick scale. The transform runs on
-the whole fine grid while it is small (``DENSE_EDT_CELLS``: the bound is then the
-exact one of a dense grid); beyond, each stored brick is transformed on its own and
-the bound also capped by the distance to the brick's faces (anything nearer than
-that lies inside the brick).
+a box touches (:func:`cell_gaps`); for an unstored brick, the same at brick scale.
+The transform runs on the whole fine grid while it is small (``DENSE_EDT_CELLS``: the
+bound is then the exact one of a dense grid); beyond, each stored brick is transformed
+on its own and the bound also capped by the distance to the brick's faces (anything
+nearer than that lies inside the brick).
 
 References
 ----------
@@ -139,7 +139,6 @@ class BrickLayout:
         return len(self.slots_np) * 4
 
 
-
 def cell_gaps(occupied):
     """Per cell of a boolean grid, the gap (in cells, box to box) to the nearest occupied
     cell, as a float array of the grid's shape (1e10 everywhere when none is: finite,
@@ -159,6 +158,7 @@ def cell_gaps(occupied):
     if grown.all():
         return np.zeros(occupied.shape)
     return distance_transform_edt(~grown) * (1.0 - 1e-5)
+
 
 class BrickGrid:
     """Cells of edge ``cell`` from ``grid_lo``, ``res`` per axis, stored in bricks of 8^3.

@@ -25,8 +25,9 @@ Empty space: a distance transform of the occupied cells gives, for each cell, th
 gap (box to box) to the nearest cell holding a primitive of its own
 (:func:`~arches_render.field.brick_grid.cell_gaps`); every primitive point lies in
 such a cell, so from any ``p`` in the cell the set is at least that far away (per
-brick on large grids, see :mod:`~arches_render.field.brick_grid`). ``eval_bounds`` returns the larger of
-that and ``-f``, so rays cross sparse sets in strides longer than ``m``.
+brick on large grids, see :mod:`~arches_render.field.brick_grid`). ``eval_bounds``
+returns the larger of that and ``-f``, so rays cross sparse sets in strides longer
+than ``m``.
 
 Spheres are capsules with ``a = b``.
 
