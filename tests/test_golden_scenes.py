@@ -4,8 +4,8 @@ re-renders the references).
 Each check renders the scene small, with each pixel's sample variance, and tests it
 against the stored reference (4x the samples) with Welch's statistic
 (:mod:`arches_render.imaging.welch`); it also proves, on that render, that a 1 %
-global change and a 25 % change of its weakest 8 x 8 window at least a quarter as
-bright as the image (darker windows are tested but not proven: see
+global change, a 25 % change of its weakest 8 x 8 window at least a quarter as bright
+as the image and one of its weakest 16 x 16 window down to 1/32 of it (shadows; see
 :mod:`arches_render.imaging.golden`), up and down, would have failed. Resolution and spp of
 each check: ``golden/checks.toml`` (also read by ``benchmarks/golden_seeds.py``).
 """

@@ -17,12 +17,14 @@ at the test spp with another seed, compares with
 :func:`arches_render.imaging.welch.welch_compare` (Welch's statistic per pixel,
 per window and for the image mean; coverage and depth per pixel), and proves
 with :func:`arches_render.imaging.welch.power_check`, on that same render, that
-a 1 % global change and a 25 % change of the weakest bright-enough 8 x 8 window,
-each up and down, would have failed. What that does not prove: a 25 % change of a
-window darker than a quarter of the image's mean luminance
-(:data:`arches_render.imaging.welch.DARK_WINDOW`: shadowed rock under sky light,
-where proving it took 150-700 spp); the window test covers those windows with no
-proven power. Because the
+a 1 % global change, a 25 % change of the weakest 8 x 8 window at least a quarter as
+bright as the image and a 25 % change of the weakest 16 x 16 window at least 1/32 as
+bright, each up and down, would have failed. Shadows are proven by the 16 x 16
+windows (:data:`arches_render.imaging.welch.WIDE_WINDOW`): an 8 x 8 window of
+shadowed rock under sky light would need up to 550 spp, a 16 x 16 one 7-47 on the
+shipped goldens. What is not proven: a change confined to a dark 8 x 8 square
+(its 16 x 16 windows see it at half the z of a whole window's change), and regions darker
+than 1/32 of the mean (none in the shipped goldens). Because the
 reference's own noise is in the test, it needs only a few times the test's
 samples (:data:`REF_SPP_FACTOR`), not a converged image.
 

@@ -29,7 +29,7 @@ import numpy as np
 from ..atomic import atomic_write
 from .exr import write_exr
 from .preview import write_png
-from .welch import WINDOW, PixelMoments, WelchResult
+from .welch import WIDE_WINDOW, WINDOW, PixelMoments, WelchResult
 
 __all__ = ["write_failure_report", "clear_report", "heatmap", "REPORT_FILES", "check_name"]
 
@@ -129,6 +129,8 @@ def _page(name: str, shape: tuple[int, int], spp: tuple[int, int], result: Welch
              f"≥ {lim['pixel_pass']:.2%} at |z| ≤ {lim['pixel_z']:.2f}", result.pixel_pass < lim["pixel_pass"]),
         _row(f"worst {WINDOW}×{WINDOW} window |z| (luminance)", f"{result.window_z:.2f} at (y, x) = "
              f"{result.window_where}", f"{lim['window_z']:.2f}", result.window_z > lim["window_z"]),
+        _row(f"worst {WIDE_WINDOW}×{WIDE_WINDOW} window |z| (luminance)", f"{result.wide_window_z:.2f} at (y, x) = "
+             f"{result.wide_window_where}", f"{lim['window_z']:.2f}", result.wide_window_z > lim["window_z"]),
         _row("image mean z (R, G, B, Y)", ", ".join(f"{z:+.2f}" for z in result.mean_z), f"±{lim['mean_z']:.2f}",
              max(abs(z) for z in result.mean_z) > lim["mean_z"]),
         _row("image mean shift (R, G, B, Y)", ", ".join(f"{v:+.3%}" for v in result.mean_shift), "", False),

@@ -23,9 +23,12 @@ rate :data:`ALPHA` unless said otherwise:
    when at least 99.75 % of them pass. Broad changes fail it; a small one is
    lost in the allowed 0.25 %.
 2. **Windows**: the same statistic on the luminance summed over every ``8 x 8``
-   window, at every position (stride 1, so a changed patch at any offset is
-   one window); Sidak over the windows (conservative: overlapping windows are
-   correlated). Summing 64 pixels cuts the noise of a local change by 8.
+   window and every ``16 x 16`` one, at every position (stride 1, so a changed
+   patch at any offset is one window); Sidak over the windows of both sizes
+   (conservative: overlapping windows are correlated). Summing 64 pixels cuts the
+   noise of a local change by 8, summing 256 by 16: the wide windows are what
+   sees a change in dark, noisy regions (shadowed rock under sky light), where an
+   8 x 8 window's noise is several times its mean.
 3. **Image mean**: the statistic on the sum over all pixels, per channel R, G,
    B and luminance Y (Sidak over the four): a 1 % global shift, a tint.
 4. **Geometry** (noise of lighting does not enter): per pixel, the fraction of
@@ -42,11 +45,13 @@ between Dr.Jit back-ends change a noise-free pixel (sky) by about 1e-6 relative,
 which would otherwise be infinitely significant.
 
 A test is only as good as its power. :func:`power_check` requires, of a 1 % global
-change and a 25 % change of the weakest ``8 x 8`` window, each up and down, that the
-change alone (its noise-free ``z``) exceed the test's limit plus the render's own
-``|z|``, so that it is detected whatever way the render itself deviates, and that
-tests 3 and 2 reject the change injected into the test render; a golden whose
-samples cannot prove that is reported as too weak, with the spp it would need.
+change, a 25 % change of the weakest ``8 x 8`` window at least a quarter as bright as
+the image and a 25 % change of the weakest ``16 x 16`` window at least 1/32 as bright,
+each up and down, that the change alone (its noise-free ``z``) exceed the test's limit
+plus the render's own ``|z|``, so that it is detected whatever way the render itself
+deviates, and that tests 3 and 2 reject the change injected into the test render; a
+golden whose samples cannot prove that is reported as too weak, with the spp it would
+need.
 
 References
 ----------
@@ -62,6 +67,7 @@ References
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field, replace
 
@@ -71,7 +77,7 @@ from scipy.special import ndtri
 from .compare import LUMINANCE_WEIGHTS
 
 __all__ = ["PixelMoments", "WelchResult", "ALPHA", "PIXEL_ALPHA", "PIXEL_PASS_FRACTION", "WINDOW",
-           "FLOOR_REL", "SHIFT", "PATCH_CHANGE", "DARK_WINDOW", "sidak_z", "welch_compare", "power_check",
+           "FLOOR_REL", "SHIFT", "PATCH_CHANGE", "DARK_WINDOW", "WIDE_WINDOW", "WIDE_FLOOR", "sidak_z", "welch_compare", "power_check",
            "weakest_window", "window_stats"]
 
 ALPHA = 1e-4
@@ -96,11 +102,22 @@ PATCH_CHANGE = 0.25
 """Relative brightening of one ``WINDOW`` square that :func:`power_check` must see rejected."""
 
 DARK_WINDOW = 0.25
-"""Windows darker than this fraction of the image's mean luminance are left out of the
-patch power check (the window test itself covers them all). In shadowed rock lit by
-sky light alone the per-sample noise is several times the mean: proving a 25 % change
-there took 150-700 spp on the shipped scenes at 96 x 54, against 30-130 spp for the
-windows at least a quarter as bright as the image."""
+"""``WINDOW`` squares darker than this fraction of the image's mean luminance are proven
+by the wide windows instead (:data:`WIDE_WINDOW`). In shadowed rock lit by sky light
+alone the per-sample noise is several times the mean: proving a 25 % change of an
+8 x 8 window there down to 1/16 of the mean would take up to 550 spp on the shipped
+goldens at 96 x 54, against 30-130 spp for the windows at least a quarter as bright."""
+
+WIDE_WINDOW = 16
+"""Side of the wide windows of the window test, pixels: what proves dark regions. Four
+times the pixels of a ``WINDOW`` square halve the relative noise of a change, so a
+25 % change of any 16 x 16 window of the shipped goldens is proven at 7-47 spp
+(measured on all 20 at their check spp, 2026-12-04; 24 x 24 would need 2-8)."""
+
+WIDE_FLOOR = 1.0 / 32.0
+"""Wide windows darker than this fraction of the image's mean luminance are left out of
+the power check (near-black: a relative change of nothing cannot be proven); none of
+the shipped goldens has one."""
 
 ONE_SURFACE = 0.05
 """A pixel whose samples' depths spread (standard deviation) by at most this fraction of
@@ -272,7 +289,9 @@ class WelchResult:
     pixel_pass : float
         Fraction of pixel-channels that passed the per-pixel test.
     window_z : float
-        Largest ``|z|`` of a window; ``window_where`` its top-left ``(y, x)``.
+        Largest ``|z|`` of a ``WINDOW`` square; ``window_where`` its top-left ``(y, x)``.
+    wide_window_z : float
+        Largest ``|z|`` of a ``WIDE_WINDOW`` square; ``wide_window_where`` its top-left.
     mean_z : tuple of float
         Signed ``z`` of the image mean of R, G, B, Y.
     mean_shift : tuple of float
@@ -302,20 +321,25 @@ class WelchResult:
     z_map: np.ndarray = field(repr=False)
     window_map: np.ndarray = field(repr=False)
     geometry_map: np.ndarray = field(repr=False)
+    wide_window_z: float = 0.0
+    wide_window_where: tuple[int, int] = (0, 0)
 
     def summary(self) -> str:
         """One line with every number and its limit."""
         lim = self.limits
         return (f"{'PASS' if self.passed else 'FAIL'}: pixels {self.pixel_pass:.4%} pass (need "
                 f"{lim['pixel_pass']:.2%}), worst {WINDOW}x{WINDOW} window |z| {self.window_z:.2f} at (y, x) = "
-                f"{self.window_where} (limit {lim['window_z']:.2f}), image mean z "
+                f"{self.window_where}, {WIDE_WINDOW}x{WIDE_WINDOW} {self.wide_window_z:.2f} at "
+                f"{self.wide_window_where} (limit {lim['window_z']:.2f}), image mean z "
                 f"{', '.join(f'{c} {z:+.2f}' for c, z in zip('RGBY', self.mean_z))} (limit {lim['mean_z']:.2f}), "
                 f"coverage |z| {self.coverage_z:.2f}, depth |z| {self.depth_z:.2f} (limit {lim['geometry_z']:.2f})")
 
     def numbers(self) -> dict:
         """The scalar results (JSON compatible), without the maps."""
         return {"passed": self.passed, "failures": list(self.failures), "pixel_pass": self.pixel_pass,
-                "window_z": self.window_z, "window_where": list(self.window_where), "mean_z": list(self.mean_z),
+                "window_z": self.window_z, "window_where": list(self.window_where),
+                "wide_window_z": self.wide_window_z, "wide_window_where": list(self.wide_window_where),
+                "mean_z": list(self.mean_z),
                 "mean_shift": list(self.mean_shift), "coverage_z": self.coverage_z, "depth_z": self.depth_z,
                 "limits": dict(self.limits)}
 
@@ -338,6 +362,19 @@ def _window_sums(a: np.ndarray, s: int) -> np.ndarray:
     sat = np.zeros((a.shape[0] + 1, a.shape[1] + 1))
     np.cumsum(np.cumsum(a, axis=0), axis=1, out=sat[1:, 1:])
     return sat[s:, s:] - sat[:-s, s:] - sat[s:, :-s] + sat[:-s, :-s]
+
+
+def _window_sides(shape) -> tuple[int, ...]:
+    """The sides of the window test's squares on an image of ``shape``: ``WINDOW`` and
+    ``WIDE_WINDOW``, each clipped to the image (one side where the two coincide)."""
+    h, w = shape
+    return tuple(dict.fromkeys(max(1, min(side, h, w)) for side in (WINDOW, WIDE_WINDOW)))
+
+
+def _window_count(shape) -> int:
+    """Windows the window test makes on an image of ``shape`` (every position of every side)."""
+    h, w = shape
+    return sum((h - s + 1) * (w - s + 1) for s in _window_sides(shape))
 
 
 def _z(diff, var, level):
@@ -437,17 +474,20 @@ def welch_compare(ref: PixelMoments, test: PixelMoments, alpha: float = ALPHA,
         failures.append(f"{1 - pixel_pass:.3%} of pixel-channels differ significantly (|z| > {z_pixel_limit:.2f}); "
                         f"at most {1 - PIXEL_PASS_FRACTION:.2%} may")
 
-    # 2. Windows, on luminance.
-    s = max(1, min(WINDOW, h, w))
-    wz = np.abs(_window_z(ref, test, s))
-    wy, wx = np.unravel_index(int(np.argmax(wz)), wz.shape)
-    z_window_limit = sidak_z(alpha, wz.size)
-    if wz[wy, wx] > z_window_limit:
-        rel = _window_sums(test.mean4[..., 3] - ref.mean4[..., 3], s)[wy, wx] / max(
-            _window_sums(ref.mean4[..., 3], s)[wy, wx], _TINY)
-        failures.append(f"{s}x{s} window at (y={wy}, x={wx}) differs in luminance by {rel:+.1%} (|z| = "
-                        f"{wz[wy, wx]:.1f} > {z_window_limit:.2f}); {int((wz > z_window_limit).sum())} window "
-                        f"position(s) over the limit")
+    # 2. Windows of both sides, on luminance.
+    z_window_limit = sidak_z(alpha, _window_count(ref.shape))
+    worst = {}
+    for s in _window_sides(ref.shape):
+        wz = np.abs(_window_z(ref, test, s))
+        wy, wx = np.unravel_index(int(np.argmax(wz)), wz.shape)
+        worst[s] = (wz, (int(wy), int(wx)))
+        if wz[wy, wx] > z_window_limit:
+            rel = _window_sums(test.mean4[..., 3] - ref.mean4[..., 3], s)[wy, wx] / max(
+                _window_sums(ref.mean4[..., 3], s)[wy, wx], _TINY)
+            failures.append(f"{s}x{s} window at (y={wy}, x={wx}) differs in luminance by {rel:+.1%} (|z| = "
+                            f"{wz[wy, wx]:.1f} > {z_window_limit:.2f}); {int((wz > z_window_limit).sum())} "
+                            f"window position(s) of that size over the limit")
+    (wz, (wy, wx)), (wide_z, wide_where) = worst[min(worst)], worst[max(worst)]
 
     # 3. Image mean, per channel and luminance.
     mz = _mean_z(ref, test)
@@ -493,13 +533,15 @@ def welch_compare(ref: PixelMoments, test: PixelMoments, alpha: float = ALPHA,
     limits = {"pixel_z": z_pixel_limit, "pixel_pass": PIXEL_PASS_FRACTION, "window_z": z_window_limit,
               "mean_z": z_mean_limit, "geometry_z": z_geometry_limit, "alpha": alpha}
     return WelchResult(passed=not failures, failures=failures, pixel_pass=pixel_pass, window_z=float(wz[wy, wx]),
-                       window_where=(int(wy), int(wx)), mean_z=tuple(float(v) for v in mz),
+                       window_where=(wy, wx), wide_window_z=float(wide_z[wide_where]),
+                       wide_window_where=wide_where, mean_z=tuple(float(v) for v in mz),
                        mean_shift=tuple(float(v) for v in shift), coverage_z=float(cov_z.max()),
                        depth_z=float(dep_z.max()), limits=limits, z_map=z_pix[..., 3], window_map=wz,
                        geometry_map=np.maximum(cov_z, dep_z))
 
 
-def weakest_window(ref: PixelMoments, test: PixelMoments, change: float = PATCH_CHANGE) -> tuple[tuple[int, int], float]:
+def weakest_window(ref: PixelMoments, test: PixelMoments, change: float = PATCH_CHANGE, side: int = WINDOW,
+                   floor: float = DARK_WINDOW) -> tuple[tuple[int, int], float]:
     """The window where scaling the test by ``1 + change`` is least significant.
 
     Parameters
@@ -508,23 +550,26 @@ def weakest_window(ref: PixelMoments, test: PixelMoments, change: float = PATCH_
         As for :func:`welch_compare`.
     change : float, optional
         Relative change of the window's beauty (negative: darkening).
+    side : int, optional
+        Side of the square windows (clipped to the image).
+    floor : float, optional
+        Only windows at least this fraction of the image's mean luminance count.
 
     Returns
     -------
     ((y, x), z)
         Top-left pixel of the window and the ``|z|`` that the change alone would
         give there (noise of the changed test and the reference, not the render's
-        own deviation), among windows at least :data:`DARK_WINDOW` as bright as the
-        image mean.
+        own deviation), among windows at least ``floor`` as bright as the image mean.
     """
     h, w = ref.shape
-    s = max(1, min(WINDOW, h, w))
+    s = max(1, min(side, h, w))
     y_ref = ref.mean4[..., 3]
     sums = _window_sums(y_ref, s)
     k = 1.0 + change
     var = _window_sums(ref.mean_variance()[..., 3] + k * k * test.mean_variance()[..., 3], s)
     z = abs(change) * _window_sums(test.mean4[..., 3], s) / np.sqrt(var + (FLOOR_REL * sums) ** 2 + _TINY)
-    eligible = sums >= DARK_WINDOW * s * s * max(float(y_ref.mean()), _TINY)
+    eligible = sums >= floor * s * s * max(float(y_ref.mean()), _TINY)
     z = np.where(eligible, z, np.inf)
     y, x = np.unravel_index(int(np.argmin(z)), z.shape)
     return (int(y), int(x)), float(z[y, x])
@@ -533,16 +578,20 @@ def weakest_window(ref: PixelMoments, test: PixelMoments, change: float = PATCH_
 def power_check(ref: PixelMoments, test: PixelMoments, alpha: float = ALPHA) -> list[str]:
     """Prove on ``test`` that the tests reject a 1 % global and a 25 % local change, up and down.
 
-    For each change (:data:`SHIFT` everywhere, :data:`PATCH_CHANGE` in the weakest
-    window of :func:`weakest_window`), brightening and darkening: the change's
+    For each change (:data:`SHIFT` everywhere; :data:`PATCH_CHANGE` in the weakest
+    ``WINDOW`` square at least :data:`DARK_WINDOW` as bright as the image and in the
+    weakest ``WIDE_WINDOW`` square at least :data:`WIDE_FLOOR` as bright, from
+    :func:`weakest_window`), brightening and darkening: the change's
     noise-free ``z`` must exceed the test's limit plus the render's own ``|z|`` there
     (so it is detected whatever way the render itself deviates, not by the luck of
     a render already deviating its way), and the change injected into ``test``
     (means and second moments scaled as a changed render's would be) must fail
     the image-mean or the window test.
 
-    What this proves for windows: the weakest window (smallest noise-free ``z`` of
-    the change) is proven on this render. Every other bright-enough window has a
+    What this proves for windows: the weakest window of each size (smallest
+    noise-free ``z`` of the change) is proven on this render, so a 25 % change of any
+    8 x 8 region a quarter as bright as the image, and of any 16 x 16 region down to
+    1/32 of it (shadows), is seen. Every other eligible window has a
     larger noise-free ``z``; a change there is missed only where the render's own
     deviation opposes it by more than that surplus, which the check does not rule
     out window by window (an estimate, not measured: with the largest own ``|z|`` of
@@ -559,7 +608,7 @@ def power_check(ref: PixelMoments, test: PixelMoments, alpha: float = ALPHA) -> 
     -------
     list of str
         One line per change that is not proven, naming the samples per pixel that
-        would prove it (empty: all four proven).
+        would prove it (empty: all six proven).
     """
     out = []
     z_mean_limit = sidak_z(alpha, 4)
@@ -574,11 +623,11 @@ def power_check(ref: PixelMoments, test: PixelMoments, alpha: float = ALPHA) -> 
             out.append(f"a {abs(change):.0%} global {word} is not proven (z of the change {alone[c]:.2f}, the "
                        f"render's own |z| {own[c]:.2f}, limit {z_mean_limit:.2f}): "
                        f"{_spp_hint(test.n, alone[c], z_mean_limit + own[c])}")
-    h, w = ref.shape
-    s = max(1, min(WINDOW, h, w))
-    z_window_limit = sidak_z(alpha, (h - s + 1) * (w - s + 1))
-    for change, word in ((PATCH_CHANGE, "brightening"), (-PATCH_CHANGE, "darkening")):
-        (wy, wx), alone = weakest_window(ref, test, change)
+    z_window_limit = sidak_z(alpha, _window_count(ref.shape))
+    for (s, floor), (change, word) in itertools.product(
+            zip(_window_sides(ref.shape), (DARK_WINDOW, WIDE_FLOOR)),
+            ((PATCH_CHANGE, "brightening"), (-PATCH_CHANGE, "darkening"))):
+        (wy, wx), alone = weakest_window(ref, test, change, s, floor)
         own_w = abs(float(_window_z(ref, test, s)[wy, wx]))
         patched = test.brightened(1.0 + change, (slice(wy, wy + s), slice(wx, wx + s)))
         zp = abs(float(_window_z(ref, patched, s)[wy, wx]))
