@@ -29,7 +29,7 @@ import pytest
 
 from arches_render.imaging import golden as gold
 from arches_render.imaging import welch
-from arches_render.imaging.compare import Thresholds, compare, mean_shift, window_error
+from arches_render.imaging.compare import LUMINANCE_WEIGHTS, Thresholds, compare, mean_shift, window_error
 from arches_render.imaging.exr import read_exr, write_exr
 from arches_render.imaging.report import REPORT_FILES, heatmap
 from arches_render.imaging.welch import PixelMoments, power_check, sidak_z, welch_compare
@@ -56,7 +56,7 @@ def _gaussian_render(truth, n, rel_sigma, rng):
     mean = truth + sigma / np.sqrt(n) * rng.standard_normal(truth.shape)
     s2 = sigma ** 2 * rng.chisquare(n - 1, truth.shape) / (n - 1)
     # Luminance is a weighted sum of independent channels here.
-    wts = np.asarray(welch.LUMINANCE_WEIGHTS)
+    wts = np.asarray(LUMINANCE_WEIGHTS)
     y_sig = np.sqrt((sigma ** 2) @ wts ** 2)
     s2_y = y_sig ** 2 * rng.chisquare(n - 1, (h, w)) / (n - 1)
     var4 = np.concatenate([s2, s2_y[..., None]], axis=-1)
@@ -461,7 +461,7 @@ def test_a_change_in_shadow_is_seen_and_proven_by_the_wide_windows():
     rel_sigma[shadow] = 30.0
     # n for z = 4 of a 25 % change of one 8x8 window (reference 4n): 0.25 * 8 / (k sqrt(1.25 / n)),
     # k = 30 f the luminance's relative noise (f < 1: the channels' noise is independent here).
-    c, wts = np.array([1.0, 0.8, 0.6]), np.asarray(welch.LUMINANCE_WEIGHTS)
+    c, wts = np.array([1.0, 0.8, 0.6]), np.asarray(LUMINANCE_WEIGHTS)
     f = np.sqrt((wts * c) @ (wts * c)) / (wts @ c)
     n = int((4.0 * 30.0 * f * np.sqrt(1.25) / (0.25 * 8.0)) ** 2)
 
