@@ -157,8 +157,9 @@ def test_in_scatter_vanishes_with_density(sky):
     """Thin air: the in-scatter is linear in the density and exactly 0 at density 0, with suns
     (``phi(tau) sum tau_k omega_k S_k``) and with a sky (``tau phi(tau) L_bg``)."""
     prev = None
-    # Optically thin from 1e-2 on (tau ~ 0.02): the in-scatter is linear in the density.
-    for s in (1e-2, 1e-4, 1e-6, 0.0):
+    # Optically thin from 1e-2 on (tau ~ 0.02): the in-scatter is linear in the density. At
+    # 1e-8 (tau ~ 1e-8) a float32 1 - exp(-tau) would be 0 or 1.2e-7: phi keeps it linear.
+    for s in (1e-2, 1e-4, 1e-6, 1e-8, 0.0):
         st = AtmosphereSettings(density=s, haze_density=0.002, haze_height=15.0)
         tr, L = _segment(st, (0, 0, 10), (0.9, 0, -0.02), 800.0, sky)
         if prev is not None and s > 0:
