@@ -49,7 +49,7 @@ with ``L_bg(d)`` the radiance of the sky emitters (summed; a ``sunsky`` without 
 sun disk) in the segment's direction ``d``, its elevation clamped to >= 0: a
 downward ray fades to the horizon in its azimuth, an upward one to the sky in its
 own direction. ``1 - Tr`` is per RGB channel (``tau phi(tau)``, no cancellation in
-thin air), so the distance blues a little faster than it reddens. ``L_bg`` is read
+thin air): Rayleigh and aerosols extinguish blue most, so blue fades first. ``L_bg`` is read
 from a table of the sky evaluated by Mitsuba once per scene
 (:class:`~arches_render.render.sky_table.SkyTable`, four gathers per segment, 0.17 %
 interpolation error at the 99th percentile). This is Koschmieder's (1924) law of the
@@ -131,9 +131,9 @@ Approximations, deliberately (closed forms, no marching, no extra rays):
   and to area and point lights are fogged over their length.
 - Shadow rays carry ``Tr`` and no in-scatter: next-event estimation sees a sky
   dimmed by ``Tr`` to the box's exit, where a BSDF-sampled ray that leaves the
-  scene sees it unchanged; with the scenes' haze (``tau`` of a few hundredths
-  up through the box) the sky light on surfaces is a few per cent low where
-  next-event estimation carries it.
+  scene sees it unchanged (MIS blends the two). On the default scene's river
+  bed ``Tr`` to the box's exit is 0.96 straight up and 0.88 at 20 degrees, so the
+  sky light that next-event estimation carries there is 4 to 12 % low.
 - Single scattering without a sky; the sun's extinction on its way to the
   scattering point is that of the sky model's ground-level sun.
 
