@@ -63,7 +63,10 @@ A scene file is data, never code. Top-level tables:
                  0.9), ``ground_albedo`` (of the ground that lights the air from
                  below, [0, 1], default the ``sunsky`` albedo, else 0.3) and an optional
                  low haze layer ``haze = {density, height}`` (extinction at
-                 ``ground`` in 1/m, > 0, and scale height in metres, > 0, default 20)
+                 ``ground`` in 1/m, > 0, and scale height in metres, > 0, default 20).
+                 With a sky light (``sunsky``, ``constant``, ``envmap``) the haze
+                 fades to the sky, and ``anisotropy``, ``aerosol_albedo`` and
+                 ``ground_albedo`` (single scattering's) have no effect
 
 Paths are relative to the scene file. Errors name the file, the key path and the
 allowed range (:class:`~arches_render.scene.errors.SceneError`).
