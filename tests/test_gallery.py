@@ -29,6 +29,24 @@ def test_gallery_is_not_empty():
     assert len(SCENES) >= 2, SCENES
 
 
+def test_readme_shows_rendered_gallery_images_listed_in_the_index():
+    """Every image the README shows is in ``docs/gallery`` and in its index (which
+    ``examples/make_gallery.py`` writes with each image's scene, spp and seconds), and
+    every gallery scene has its image there (the Fig. 11 steps as one strip)."""
+    import re
+    repo = GALLERY.parents[1]
+    shown = re.findall(r'src="docs/gallery/([\w.]+\.png)"', (repo / "README.md").read_text())
+    index = (repo / "docs" / "gallery" / "index.md").read_text()
+    assert len(set(shown)) >= 10, shown
+    for name in shown:
+        assert (repo / "docs" / "gallery" / name).is_file(), name
+        stem = name[:-4]
+        assert f"[{stem}]" in index or f"[{stem}_step1]" in index, f"{name} is not in docs/gallery/index.md"
+    for scene in SCENES:
+        stem = re.sub(r"_step\d+$", "", scene.stem)
+        assert f"{stem}.png" in shown, f"the README does not show {scene.name}'s image"
+
+
 def _looks_lit(desc, camera, rgb, layers, walls=True):
     """A landscape under a sky, judged by the AOVs: finite; every pixel whose footprint lies below
     the horizon hit something in every sample (a missed slab shows the sky there, which a beauty
