@@ -487,3 +487,29 @@ def test_rays_that_leave_the_scene_see_the_sky():
     assert np.array(atm.transmittance(o, d, atm.exit_distance(o, d))).max() < 0.2
     err = _rel(fogged, clear)
     assert err.max() < ERR_AWAY_FROM_SUN, err.max()  # the sun is 100 degrees off the view
+
+
+def test_a_white_ground_under_a_uniform_sky_is_a_furnace_in_any_haze():
+    """A white Lambertian ground under a constant sky of radiance C: without air it has
+    radiance C everywhere, and with the sky as the haze's background it still must,
+    whatever the density (every path sees ``C Tr + (1 - Tr) C``). The in-scatter of the
+    segment a path takes next is counted once, by the path; next-event shadow rays carry
+    the sky's ``C Tr`` alone (adding the in-scatter to them too came out 11 % bright
+    here). The haze is dense (``Tr`` to the box's exit below 0.5 at 15 degrees above the
+    ground)."""
+    sky = {"type": "constant", "radiance": {"type": "rgb", "value": [1.0, 1.0, 1.0]}}
+    ground = {"type": "disk", "to_world": mi.ScalarTransform4f().scale(2000.0),
+              "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [1.0, 1.0, 1.0]}}}
+    camera = {"type": "perspective", "fov": 40.0,
+              "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 10.0], target=[0, 20.0, 0], up=[0, 0, 1]),
+              "film": {"type": "hdrfilm", "width": 24, "height": 16, "rfilter": {"type": "box"}}}
+    scene = mi.load_dict({"type": "scene", "integrator": {"type": "implicit_path", "max_depth": 4},
+                          "sensor": camera, "light": sky, "ground": ground})
+    box = ([-2000.0, -2000.0, -1.0], [2000.0, 2000.0, 300.0])
+    atm = _sky_atmosphere(AtmosphereSettings(density=3.0, haze_density=0.004, haze_height=60.0), sky, box)
+    o, d = mi.Point3f(0.0, 0.0, 0.0), mi.Vector3f(*map(float, _horizontal(90.0, math.tan(math.radians(15.0)))))
+    assert np.array(atm.transmittance(o, d, atm.exit_distance(o, d))).max() < 0.5
+    scene.integrator().attach_atmosphere(atm)
+    img = render_image(scene, 256, seed=3)
+    # 24 x 16 pixels x 256 samples of a cosine-weighted ground: the mean's noise is ~0.2 %.
+    assert abs(float(img.mean()) - 1.0) < 0.01, img.mean()

@@ -129,11 +129,13 @@ Approximations, deliberately (closed forms, no marching, no extra rays):
   a sky, a miss comes out as the sky; without one, the sky above the horizon
   clears over the angle at which rays climb out of the box. Segments to a hit
   and to area and point lights are fogged over their length.
-- Shadow rays carry ``Tr`` and no in-scatter: next-event estimation sees a sky
-  dimmed by ``Tr`` to the box's exit, where a BSDF-sampled ray that leaves the
-  scene sees it unchanged (MIS blends the two). On the default scene's river
-  bed ``Tr`` to the box's exit is 0.96 straight up and 0.88 at 20 degrees, so the
-  sky light that next-event estimation carries there is 4 to 12 % low.
+- Shadow rays carry ``Tr`` and no in-scatter, and that is consistent, not an
+  approximation: the in-scatter of the segment a path takes next is added once, by
+  the path itself, whether that segment hits or leaves the scene; next-event
+  estimation and the BSDF-sampled hit of the emitter (weighted by MIS) share only
+  the emitter's light, ``L_e Tr``. A white ground under a uniform sky stays exactly
+  as bright as the sky in any haze (``tests/test_atmosphere.py``, the furnace test;
+  adding the in-scatter to shadow rays as well made it 11 % too bright).
 - Single scattering without a sky; the sun's extinction on its way to the
   scattering point is that of the sky model's ground-level sun.
 
