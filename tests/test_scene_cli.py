@@ -225,3 +225,15 @@ def test_mesh_and_mesh_render_refuse_a_voxel_that_cannot_polygonize(tmp_path, ca
         assert "\n" not in err and "Traceback" not in err and err.startswith("arches-render"), err
         assert all(w in err for w in says), err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.toml"]
+
+
+def test_a_fresh_process_loads_a_scene_with_meshes_first():
+    """``load_scene`` as a script's first call, on a scene whose ground mesh is read before
+    any field node selects the Mitsuba variant: it failed with "Cannot access
+    'ScalarTransform4f' before setting a variant" (``examples/make_gallery.py
+    blocks_limestone_scarp`` did)."""
+    code = "from arches_render.scene import load_scene; print(len(load_scene(%r).meshes))" % (
+        str(SCENES / "blocks_limestone_scarp.toml"))
+    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip() == "1"

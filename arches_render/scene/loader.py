@@ -81,6 +81,7 @@ from pathlib import Path
 import mitsuba as mi
 
 from .. import extensions, tomlfile
+from ..backend import variant
 from ..field.node import finite_box
 from ..imaging.colour import VIEWS
 from ..materials import presets
@@ -419,6 +420,10 @@ def load_scene(path) -> SceneDescription:
 
 def parse_scene(data: dict, path) -> SceneDescription:
     """Validate already-parsed TOML data (see :func:`load_scene`)."""
+    # A scene holds Mitsuba values (mesh transforms) before any field node is built, and a
+    # node would select the variant only then: select it first (a script that loads a
+    # scene with meshes before anything else failed here).
+    variant()
     path = Path(path)
     base_dir = path.parent
     root = Table(data, path)
