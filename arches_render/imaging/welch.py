@@ -77,8 +77,8 @@ from scipy.special import ndtri
 from .pixel_moments import PixelMoments
 
 __all__ = ["PixelMoments", "WelchResult", "ALPHA", "PIXEL_ALPHA", "PIXEL_PASS_FRACTION", "WINDOW",
-           "FLOOR_REL", "SHIFT", "PATCH_CHANGE", "DARK_WINDOW", "WIDE_WINDOW", "WIDE_FLOOR", "sidak_z", "welch_compare", "power_check",
-           "weakest_window", "window_stats"]
+           "FLOOR_REL", "SHIFT", "PATCH_CHANGE", "DARK_WINDOW", "WIDE_WINDOW", "WIDE_FLOOR", "sidak_z",
+           "welch_compare", "power_check", "weakest_window", "window_stats"]
 
 ALPHA = 1e-4
 """Family-wise false-alarm rate of the window, mean and geometry tests (each)."""
