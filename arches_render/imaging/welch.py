@@ -345,18 +345,18 @@ def welch_compare(ref: PixelMoments, test: PixelMoments, alpha: float = ALPHA,
 
     # 2. Windows of both sides, on luminance.
     z_window_limit = sidak_z(alpha, _window_count(ref.shape))
-    worst = {}
+    by_side = {}
     for s in _window_sides(ref.shape):
         wz = np.abs(_window_z(ref, test, s))
         wy, wx = np.unravel_index(int(np.argmax(wz)), wz.shape)
-        worst[s] = (wz, (int(wy), int(wx)))
+        by_side[s] = (wz, (int(wy), int(wx)))
         if wz[wy, wx] > z_window_limit:
             rel = _window_sums(test.mean4[..., 3] - ref.mean4[..., 3], s)[wy, wx] / max(
                 _window_sums(ref.mean4[..., 3], s)[wy, wx], _TINY)
             failures.append(f"{s}x{s} window at (y={wy}, x={wx}) differs in luminance by {rel:+.1%} (|z| = "
                             f"{wz[wy, wx]:.1f} > {z_window_limit:.2f}); {int((wz > z_window_limit).sum())} "
                             f"window position(s) of that size over the limit")
-    (wz, (wy, wx)), (wide_z, wide_where) = worst[min(worst)], worst[max(worst)]
+    (wz, (wy, wx)), (wide_z, wide_where) = by_side[min(by_side)], by_side[max(by_side)]
 
     # 3. Image mean, per channel and luminance.
     mz = _mean_z(ref, test)
