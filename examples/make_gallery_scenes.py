@@ -198,22 +198,53 @@ def karst():
     write(name, doc, "Gallery: Fig. 17 of Paris et al. 2019, karst (examples/make_gallery_scenes.py)")
 
 
-def cove_dem():
-    """A limestone plateau ending in a wavy sea cliff over a sand cove, a headland to the east."""
-    nx, ny, cell = 141, 121, 1.0
+def cove_dem(cell=2.0, cliff_width=6.0):
+    """A limestone plateau ending in a wavy sea cliff over a sand cove, a headland to the east
+    (140 x 120 m; noise features in metres, whatever the cell)."""
+    nx, ny = int(round(140 / cell)) + 1, int(round(120 / cell)) + 1
     X, Y = grid(nx, ny, cell)
     # The cliff line wanders; behind it a plateau at ~22 m rising gently inland.
-    edge = 6.0 + 6.0 * np.sin(X / 17.0) + 3.0 * np.sin(X / 7.3 + 1.0) + noise(X.shape, 21, 8.0, 1.2)
+    edge = 6.0 + 6.0 * np.sin(X / 17.0) + 3.0 * np.sin(X / 7.3 + 1.0) + noise(X.shape, 21, 8.0 / cell, 1.2)
     edge = np.where(X > 35.0, edge - 1.6 * (X - 35.0), edge)  # the headland juts seaward
-    cliff = smooth((Y - edge) / 3.5)
-    plateau = 21.0 + 0.06 * (Y - edge) + noise(X.shape, 22, 10.0, 1.3)
+    cliff = smooth((Y - edge) / cliff_width)
+    plateau = 21.0 + 0.06 * (Y - edge) + noise(X.shape, 22, 10.0 / cell, 1.3)
     # The cove floor: a beach rising from the sea (z < 0 south of y ~ -28) to the cliff foot.
-    floor = -4.0 + 6.5 * smooth((Y + 46.0) / 36.0) + noise(X.shape, 23, 6.0, 0.25)
-    return floor + (plateau - floor) * cliff + noise(X.shape, 24, 1.5, 0.15) * cliff, cell
+    floor = -4.0 + 6.5 * smooth((Y + 46.0) / 36.0) + noise(X.shape, 23, 6.0 / cell, 0.25)
+    return floor + (plateau - floor) * cliff + noise(X.shape, 24, 1.5 / cell, 0.15) * cliff, cell
+
+
+def weathered_fin(scale, seed=33):
+    """The 3-G-map window fin (``data/gmaps_arch/volume_0.ply``, the arch scenario's output:
+    a fin of 2.4 x 0.8 x 2.5 m pierced by a window) weathered for the landscape: ``scale``
+    (x, y, z) applied, subdivided to ~20 cm edges, its edges rounded by Taubin smoothing
+    (which keeps the volume) and displaced along the normals by ~16 cm of smooth noise.
+    The topology (one volume, genus one) is the G-map's. Written beside the source as
+    ``volume_0.weathered.ply``; returns its path relative to the gallery folder."""
+    import trimesh
+    from scipy.ndimage import map_coordinates
+    src = GALLERY / DATA / "gmaps_arch" / "volume_0.ply"
+    mesh = trimesh.load(src, process=True)
+    mesh.apply_scale(np.asarray(scale, float)) if np.ndim(scale) == 0 else \
+        mesh.apply_transform(np.diag([*map(float, scale), 1.0]))
+    v, f = trimesh.remesh.subdivide_to_size(mesh.vertices, mesh.faces, max_edge=0.2)
+    mesh = trimesh.Trimesh(v, f, process=True)
+    trimesh.smoothing.filter_taubin(mesh, lamb=0.5, nu=-0.53, iterations=60)
+    # Smooth noise: a Gaussian-filtered random grid of 0.25 m cells over the mesh's box.
+    lo, hi = mesh.bounds[0] - 1.0, mesh.bounds[1] + 1.0
+    shape = np.ceil((hi - lo) / 0.25).astype(int) + 1
+    rng = np.random.default_rng(seed)
+    grid_ = gaussian_filter(rng.normal(size=shape), 2.0) + 0.3 * gaussian_filter(rng.normal(size=shape), 1.0)
+    n = map_coordinates(grid_, ((mesh.vertices - lo) / 0.25).T, order=1)
+    mesh.vertices = mesh.vertices + (0.16 * n / n.std())[:, None] * mesh.vertex_normals
+    assert mesh.is_watertight and mesh.euler_number == 0  # one closed surface of genus one
+    out = GALLERY / DATA / "gmaps_arch" / "volume_0.weathered.ply"
+    mesh.export(out)
+    return f"{DATA}/gmaps_arch/volume_0.weathered.ply"
 
 
 def every_generator():
-    """Item 5 of issue 15: one landscape holding all five generators."""
+    """Item 5 of issue 15 (rebuilt for issue 33): one sea cove holding all five generators,
+    each at a scale and in a place where it reads as itself."""
     name = "every_generator"
     H, cell = cove_dem()
     doc, _ = amplified(name, H, cell, "sea", seed=5)
@@ -221,47 +252,63 @@ def every_generator():
     nodes = doc["nodes"]
     terrain_root = doc["field"]["root"]
     # Implicit blocks (Paris et al. 2020) where the amplified terrain is steep: host = the terrain.
+    # The host's field is a vertical distance, saturated at +-T beyond R metres of it (R = 8 m,
+    # T = 4 on this 2 m DEM): on a cliff of slope ~4 the band where blocks can be anchored is
+    # ~4 m across, about the face's depth of blocks of ~2 m, so they cover the face; the joints
+    # open between them and the blocks stand out of the face by up to half their size (no
+    # protrusion clip: on this host it cuts the rim's blocks into teeth); ``region`` stops the
+    # blocks below the rim, where tall ones stood above the plateau's edge like columns.
     nodes["cliff_blocks"] = {"type": "blocks", "host": terrain_root, "structure": "rhombohedral",
-                             "tile_size": 16.0, "spacing": 2.2, "obliquity": 20.0, "joint_width": 0.16,
-                             "smoothness": 0.3, "warp": 0.05, "warp_wavelength": 0.9,
-                             "region": [-70.0, -20.0, 2.0, 70.0, 40.0, 26.0],
-                             "distance_range": [-2.0, 1.0], "min_slope": 55.0, "protrusion": 0.8, "seed": 3}
+                             "tile_size": 16.0, "spacing": 1.8, "obliquity": 20.0, "joint_width": 0.2,
+                             "smoothness": 0.3, "warp": 0.06, "warp_wavelength": 1.2,
+                             "region": [-70.0, -20.0, 1.0, 70.0, 40.0, 18.0],
+                             "distance_range": [-4.0, 3.5], "min_slope": 55.0, "seed": 3}
     # A layered sand deposit (Peytavie et al. 2009) on the cove: material stacks over the terrain,
     # sand dropped by the deposit brush and spread at its angle of repose.
     nodes["cove_sand"] = {"type": "layers", "source": "node", "node": terrain_root, "cell": 0.5,
-                          "extent": [-40.0, -34.0, 20.0, -6.0], "z_range": [-5.0, 8.0],
+                          "extent": [-60.0, -34.0, 40.0, 6.0], "z_range": [-5.0, 8.0],
                           "column": [{"material": "sand", "thickness": 0.3}, {"material": "bedrock"}],
                           "seed": 5,
-                          "operations": [{"tool": "deposit", "center": [-18.0, -16.0], "radius": 9.0,
+                          "operations": [{"tool": "deposit", "center": [-36.0, -12.0], "radius": 9.0,
                                           "amount": 1.6},
-                                         {"tool": "deposit", "center": [2.0, -20.0], "radius": 7.0,
+                                         {"tool": "deposit", "center": [8.0, -10.0], "radius": 7.0,
                                           "amount": 1.2}]}
     nodes["coast"] = {"type": "union", "children": ["cliff_blocks", "cove_sand"]}
     doc["field"]["root"] = "coast"
-    doc["materials"]["landscape"]["masks"] = [
+    landscape = doc["materials"]["landscape"]
+    # Grass on the plateau only (the amplified preset reaches down to the beach); sand where
+    # the layered terrain holds sand, up to the cliff foot.
+    landscape["overrides"].update({"grass.height_min": 12.0, "sand.height_max": 7.0, "sand.height_soft": 1.0,
+                                   "sand.tint": [0.70, 0.62, 0.48]})
+    landscape["masks"] = [
         {"layer": "sand", "node": {"type": "layers_ratio", "terrain": "cove_sand", "material": "sand",
                                    "sigma": 0.5}, "lo": 0.15, "hi": 0.5}]
-    # A window fin from the 3-G-map evolution (Bezin et al.), as meshes, scaled to the cove.
-    doc["materials"]["fin"] = {"type": "triplanar", "preset": "sandstone",
-                               "overrides": {"rock.scale": 4.0, "sand.scale": 2.0}}
-    # Only the fin (volume 0): its limestone plinth (volume 1) would read as a pedestal on the sand;
-    # the fin's foot is sunk 0.6 m into the cove, its window turned to the camera.
-    doc["meshes"].append({"file": f"{DATA}/gmaps_arch/volume_0.ply", "material": "fin",
-                          "translate": [-24.0, -8.0, 1.0], "scale": 3.0,
-                          "rotate": {"axis": [0.0, 0.0, 1.0], "angle": -36.0}})
-    # Rock piles (Peytavie et al. 2009) at the cliff foot: support = the terrain field.
-    doc["rock_piles"] = [{"support": terrain_root, "extent": [-12.0, 4.0, -2.0, 14.0, 16.0, 6.0],
-                          "rock_size": 0.9, "n": 4, "seed": 9, "g_max": 4.0, "min_inside": 0.35,
-                          "erosion": {"steps": 8, "rate": 0.5}, "preset": "limestone",
+    # A sea arch from the 3-G-map evolution (Bezin et al.): the window fin (2.4 x 0.8 x 2.5 m),
+    # stretched into a stack 6 m wide and 11 m tall, weathered (edges rounded, surface rough)
+    # and stood in the shallows in the cliff's limestone, its window an arch over the water.
+    doc["materials"]["stack"] = {"type": "triplanar", "preset": "limestone",
+                                 "overrides": {"rock.scale": 3.0, "bedding.scale": 4.0,
+                                               "rock.tint": [0.42, 0.40, 0.36]}}
+    doc["meshes"].append({"file": weathered_fin([2.6, 3.4, 4.4]), "material": "stack",
+                          "translate": [-10.0, -30.0, -2.6],
+                          "rotate": {"axis": [0.0, 0.0, 1.0], "angle": -40.0}})
+    # Rock piles (Peytavie et al. 2009): a talus cone of fallen blocks leaning on the cliff foot.
+    # and blocks fallen from the stack round its foot, awash.
+    nodes["talus"] = {"type": "union", "children": [
+        {"type": "scale", "factor": [10.0, 6.0, 5.5], "pivot": [-18.0, -1.0, 1.0],
+         "child": {"type": "sphere", "center": [-18.0, -1.0, 1.0], "radius": 1.0}},
+        {"type": "scale", "factor": [6.0, 5.0, 1.2], "pivot": [-10.0, -30.0, -0.8],
+         "child": {"type": "sphere", "center": [-10.0, -30.0, -0.8], "radius": 1.0}}]}
+    doc["rock_piles"] = [{"support": "talus", "rock_size": 1.3, "n": 4, "seed": 9, "g_max": 4.0,
+                          "erosion": {"steps": 4, "rate": 0.5}, "preset": "limestone",
                           # The cliff's own stone, darker: fallen blocks are fresh and in shade.
-                          "overrides": {"rock.scale": 2.0, "rock.tint": [0.42, 0.39, 0.34],
+                          "overrides": {"rock.scale": 2.0, "rock.tint": [0.36, 0.34, 0.31],
                                         "bedding.coverage": 0.0}}]
-    doc = finish(doc, name, "One landscape, every generator: an amplified sea cliff (2019) with implicit "
-                 "blocks on its face (2020), rock piles at its foot and a layered sand cove (2009) "
-                 "with a 3-G-map window fin",
-                 {"origin": [-48.0, -42.0, 11.0], "target": [-4.0, 8.0, 9.0], "fov": 55.0},
-                 {"elevation": 34.0, "azimuth": -65.0},
-                 # 16 spp: at 640x360 this scene took ~14x the CPU of the canyon scene (compile included).
+    doc = finish(doc, name, "One landscape, every generator: an amplified sea cliff (2019) fractured "
+                 "into implicit blocks (2020), a talus of fallen rocks at its foot (2009), a layered "
+                 "sand cove (2009) and a sea arch from a 3-G-map evolution",
+                 {"origin": [-62.0, -36.0, 7.0], "target": [10.0, -6.0, 7.0], "fov": 55.0},
+                 {"elevation": 35.0, "azimuth": -45.0},
                  {"haze": {"density": 0.001, "height": 20.0}}, spp=16, max_depth=3)
     # A flight for ``turntable --path``: from the sea to the cove floor, then up onto the plateau.
     # "orbit": the turntable's camera (turntable --camera orbit), high enough that the half turn
@@ -272,7 +319,7 @@ def every_generator():
     doc["camera_path"] = {"fps": 24.0, "keys": [{"camera": "camera", "time": 0.0},
                                                 {"camera": "cove", "time": 4.0},
                                                 {"camera": "plateau", "time": 9.0}]}
-    write(name, doc, "Gallery: every generator in one landscape, issue 15 item 5 "
+    write(name, doc, "Gallery: every generator in one landscape, issue 15 item 5, rebuilt for issue 33 "
                      "(examples/make_gallery_scenes.py)")
 
 
