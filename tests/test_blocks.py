@@ -212,6 +212,32 @@ def test_replicated_field_lipschitz_and_distance_bounds(amplified):
     assert np.mean(d[air] > -f[air] / node.lipschitz * 1.5) > 0.1
 
 
+def test_blocks_that_keep_no_copy_leave_the_host_its_own_free_distances(tiles):
+    """A presence table that keeps no block (a region far from the host's surface) makes
+    ``t = -m`` everywhere: ``{t >= 0}`` is empty, so the union must step as the host alone.
+    The block field answered Hart's ``m / L`` (~20 cm) everywhere instead, and held every
+    ray of every_generator to 271 steps where 36 do."""
+    import drjit as dr
+    import mitsuba as mi
+    host = _cliff()
+    node = replicate(host, tiles["prismatic"], [40, 40, 40], [41, 41, 41], distance_range=(-1.0, 1.0),
+                     min_slope=50.0, smoothness=0.2, warp=0.04, warp_wavelength=0.4, seed=2)
+    blocks = node.children[1]
+    assert blocks.n_present == 0
+    rng = np.random.default_rng(3)
+    p = rng.uniform([-8, -8, -1], [8, 8, 12], (4000, 3)).astype(np.float32)
+    P = mi.Point3f(*(mi.Float(p[:, k]) for k in range(3)))
+    f_host, (d_host,) = host.eval_bounds(P, (0.0,))
+    f, (d,) = node.eval_bounds(P, (0.0,))
+    dr.eval(f_host, d_host, f, d)
+    air = f_host.numpy() < 0
+    assert air.mean() > 0.3
+    assert np.array_equal(f.numpy(), np.maximum(f_host.numpy(), -blocks.m_np))
+    assert np.allclose(d.numpy()[air], d_host.numpy()[air])
+    _, (d_blocks,) = blocks.eval_bounds(P, (0.0,))
+    assert np.all(np.isinf(d_blocks.numpy()))
+
+
 def test_presence_follows_distance_range_and_slope(tiles, amplified):
     host = _cliff()
     blocks = amplified.children[1]

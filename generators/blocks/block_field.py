@@ -415,9 +415,17 @@ class BlockField(Node):
         """Distances to ``{t >= -c}``: Hart's ``-t / L``; for ``c < m`` also the larger of
         the empty-space distance and ``min(-v_max / L, m - c + face)``, where ``v_max``
         bounds the listed copies and ``face`` is the distance to the world cell's
-        faces (an unlisted copy's solid, grown by ``m``, lies outside the cell)."""
+        faces (an unlisted copy's solid, grown by ``m``, lies outside the cell).
+
+        With no copy present at all (a presence table that kept none) ``t = -m``
+        everywhere, so ``{t >= -c}`` is empty for ``c < m``: the distance is infinite.
+        (Hart's ``(m - c) / L`` there held every ray of a scene to steps of ~m / L,
+        ~20 cm, wherever this node is a union's operand: every_generator with its blocks'
+        region emptied took 271 camera steps a ray, against 36 with blocks.)"""
         f, extra = self._eval(p)
         inv = 1.0 / self.lipschitz
+        if self.presence_np is not None and self.world_lo is None:
+            return f, tuple(mi.Float(dr.inf) + 0.0 * f if c < self.m_np else 0.0 * f for c in levels)
         out = []
         for c in levels:
             d = dr.maximum(-f - c, 0.0) * inv
