@@ -198,15 +198,21 @@ def karst():
     write(name, doc, "Gallery: Fig. 17 of Paris et al. 2019, karst (examples/make_gallery_scenes.py)")
 
 
-def cove_dem(cell=2.0, cliff_width=6.0):
+def cove_dem(cell=2.0, cliff_width=10.0):
     """A limestone plateau ending in a wavy sea cliff over a sand cove, a headland to the east
-    (140 x 120 m; noise features in metres, whatever the cell)."""
+    (140 x 120 m; noise features in metres, whatever the cell).
+
+    ``cliff_width`` is measured across the cliff line (not along y): the bilinear DEM lookup
+    can only hold a cliff some cells wide. Narrower (6 m along y: ~3 m across the headland's
+    oblique edge, ~5 m across the back cliff's), the rim stair-stepped on the 2 m cells into
+    a regular sawtooth on the skyline; the blocks give the face its sharp detail."""
     nx, ny = int(round(140 / cell)) + 1, int(round(120 / cell)) + 1
     X, Y = grid(nx, ny, cell)
     # The cliff line wanders; behind it a plateau at ~22 m rising gently inland.
     edge = 6.0 + 6.0 * np.sin(X / 17.0) + 3.0 * np.sin(X / 7.3 + 1.0) + noise(X.shape, 21, 8.0 / cell, 1.2)
     edge = np.where(X > 35.0, edge - 1.6 * (X - 35.0), edge)  # the headland juts seaward
-    cliff = smooth((Y - edge) / cliff_width)
+    across = (Y - edge) / np.sqrt(1.0 + np.gradient(edge, cell, axis=1) ** 2)  # distance from the line
+    cliff = smooth(across / cliff_width)
     plateau = 21.0 + 0.06 * (Y - edge) + noise(X.shape, 22, 10.0 / cell, 1.3)
     # The cove floor: a beach rising from the sea (z < 0 south of y ~ -28) to the cliff foot.
     floor = -4.0 + 6.5 * smooth((Y + 46.0) / 36.0) + noise(X.shape, 23, 6.0 / cell, 0.25)
@@ -252,9 +258,10 @@ def every_generator():
     nodes = doc["nodes"]
     terrain_root = doc["field"]["root"]
     # Implicit blocks (Paris et al. 2020) where the amplified terrain is steep: host = the terrain.
-    # The host's field is a vertical distance, saturated at +-T beyond R metres of it (R = 8 m,
-    # T = 4 on this 2 m DEM): on a cliff of slope ~4 the band where blocks can be anchored is
-    # ~4 m across, about the face's depth of blocks of ~2 m, so they cover the face; the joints
+    # The host's field is a vertical distance, saturated at +-T beyond R metres of it (amplify
+    # picks R = 2 F ~ 3.6 m, T = R / 2 from the coast's cliff): on a cliff of slope ~3 the band
+    # where blocks can be anchored is a few metres across, about the face's depth of blocks of
+    # ~2 m, so they cover the face; the joints
     # open between them and the blocks stand out of the face by up to half their size (no
     # protrusion clip: on this host it cuts the rim's blocks into teeth); ``region`` stops the
     # blocks below the rim, where tall ones stood above the plateau's edge like columns.

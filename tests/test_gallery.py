@@ -81,7 +81,7 @@ def test_combined_scene_uses_every_generator():
     # Blocks and sand sit on the amplified terrain: their host/source is the terrain's node.
     kinds = {n.kind for n in desc.field.walk()}
     assert {"implicit_heightfield", "skeletal_set", "blocks_field", "layers"} <= kinds, kinds
-    assert len(desc.rock_piles) == 1  # rocks, support = the terrain
+    assert len(desc.rock_piles) == 1  # rocks, support = the talus node (two ellipsoids at the cliff foot)
     fins = [m for m in desc.meshes if "gmaps_arch" in str(m.get("filename", ""))]
     manifest = json.loads((GALLERY / "data" / "gmaps_arch" / "manifest.json").read_text())
     assert len(fins) == 1 and manifest["counts"]["hole"] >= 1  # the G-map window fin (genus one), a mesh
