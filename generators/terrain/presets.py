@@ -273,14 +273,25 @@ def karst(run: Amplification) -> None:
 
 # -- hoodoos ----------------------------------------------------------------------------------
 def hoodoos_geology(run: Amplification, noise_seed: int) -> dict:
-    """Alternating hard and soft strata, about one grammar symbol per layer."""
+    """Alternating hard and soft strata, about one grammar symbol per layer, each bed of
+    its own hardness.
+
+    The periodic beds alone made every bed the same: one hardness profile repeated up
+    the whole relief, so the hoodoos grew the same stack of symbols and the strata
+    colours (levels between hard and soft rock) were a uniform stripe. The paper's
+    turbulence primitive over elevation, ``rho = t(p_z / lambda0)`` (Paris et al. 2019,
+    Sec. 4.1), added to the beds gives each bed its own peak hardness: some beds
+    reach the hardest colour and stand out as ledges and caps, others stay soft and
+    thin; ``lambda0`` of three beds varies it from one bed to the next few.
+    """
     zlo, _, Z = run.relief
     spacing = run.feature / 3.0  # one grammar symbol per layer
     return {"type": "resistance_blend", "children": [
         {"type": "resistance_constant", "value": 0.3},
         {"type": "resistance_strata", "spacing": float(spacing), "R": float(0.45 * spacing),
          "weight": 0.6, "phase": float(zlo)},
-        _turbulence(noise_seed, 1.5 * spacing, 0.1, 2, strata=False)]}
+        _turbulence(noise_seed, 1.5 * spacing, 0.1, 2, strata=False),
+        _turbulence(noise_seed + 1, 3.0 * spacing, 0.25, 3, strata=True)]}
 
 
 def hoodoos(run: Amplification) -> None:
