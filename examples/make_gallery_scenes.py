@@ -230,7 +230,9 @@ def weathered_fin(scale, seed=33):
     from scipy.ndimage import map_coordinates
     src = GALLERY / DATA / "gmaps_arch" / "volume_0.ply"
     mesh = trimesh.load(src, process=True)
-    mesh.apply_scale(np.asarray(scale, float)) if np.ndim(scale) == 0 else \
+    if np.ndim(scale) == 0:
+        mesh.apply_scale(float(scale))
+    else:
         mesh.apply_transform(np.diag([*map(float, scale), 1.0]))
     v, f = trimesh.remesh.subdivide_to_size(mesh.vertices, mesh.faces, max_edge=0.2)
     mesh = trimesh.Trimesh(v, f, process=True)
@@ -261,10 +263,10 @@ def every_generator():
     # The host's field is a vertical distance, saturated at +-T beyond R metres of it (amplify
     # picks R = 2 F ~ 3.6 m, T = R / 2 from the coast's cliff): on a cliff of slope ~3 the band
     # where blocks can be anchored is a few metres across, about the face's depth of blocks of
-    # ~2 m, so they cover the face; the joints
-    # open between them and the blocks stand out of the face by up to half their size (no
-    # protrusion clip: on this host it cuts the rim's blocks into teeth); ``region`` stops the
-    # blocks below the rim, where tall ones stood above the plateau's edge like columns.
+    # ~2 m, so they cover the face; the joints open between them and the blocks stand out
+    # of the face by up to half their size (no protrusion clip: on this host it cuts the
+    # rim's blocks into teeth); ``region`` stops the blocks below the rim, where tall ones
+    # stood above the plateau's edge like columns.
     nodes["cliff_blocks"] = {"type": "blocks", "host": terrain_root, "structure": "rhombohedral",
                              "tile_size": 16.0, "spacing": 1.8, "obliquity": 20.0, "joint_width": 0.2,
                              "smoothness": 0.3, "warp": 0.06, "warp_wavelength": 1.2,
@@ -299,7 +301,7 @@ def every_generator():
     doc["meshes"].append({"file": weathered_fin([2.6, 3.4, 4.4]), "material": "stack",
                           "translate": [-10.0, -30.0, -2.6],
                           "rotate": {"axis": [0.0, 0.0, 1.0], "angle": -40.0}})
-    # Rock piles (Peytavie et al. 2009): a talus cone of fallen blocks leaning on the cliff foot.
+    # Rock piles (Peytavie et al. 2009): a talus cone of fallen blocks leaning on the cliff foot,
     # and blocks fallen from the stack round its foot, awash.
     nodes["talus"] = {"type": "union", "children": [
         {"type": "scale", "factor": [10.0, 6.0, 5.5], "pivot": [-18.0, -1.0, 1.0],
