@@ -210,7 +210,16 @@ def sea(run: Amplification) -> None:
 
 # -- river ------------------------------------------------------------------------------------
 def river_geology(run: Amplification, noise_seed: int) -> dict:
-    """Soft horizontal strata in a hard rock: undercuts where the river meets them."""
+    """Soft horizontal strata in a hard rock, each bed of its own hardness: undercuts where
+    the river meets the soft ones.
+
+    As for the hoodoos (:func:`hoodoos_geology`), the periodic beds alone repeat one
+    hardness profile up the walls: every soft bed was undercut alike and the strata
+    colours were a uniform stripe. The paper's turbulence primitive over elevation,
+    ``rho = t(p_z / lambda0)`` (Paris et al. 2019, Sec. 4.1; ``lambda0`` three beds),
+    gives each bed its own hardness, so some soft beds are barely softer than the rock
+    around them and others are deeply undercut.
+    """
     zlo, _, Z = run.relief
     F = run.feature
     spacing = float(np.clip(run.scale("strata_thickness_m", Z / 8), 2.0 * F, max(2.0 * F, Z / 3)))
@@ -218,7 +227,8 @@ def river_geology(run: Amplification, noise_seed: int) -> dict:
         {"type": "resistance_constant", "value": 0.75},
         {"type": "resistance_strata", "spacing": float(spacing), "R": float(0.3 * spacing),
          "weight": -0.6, "phase": float(zlo)},
-        _turbulence(noise_seed, 2.0 * F, 0.1, 3, strata=False)]}
+        _turbulence(noise_seed, 2.0 * F, 0.1, 3, strata=False),
+        _turbulence(noise_seed + 1, 3.0 * spacing, 0.25, 3, strata=True)]}
 
 
 def river(run: Amplification) -> None:
