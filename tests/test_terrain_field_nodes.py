@@ -399,15 +399,18 @@ def test_erosion_steps_with_slopes_in_small_balls_next_to_its_walls():
     assert np.median(d.numpy() / hart) > 2.5
 
 
-def _free_violation(node, p, level, direction, rng, k=12):
-    """Largest ``f + level`` found in the balls (or two-sided line segments) that
-    ``eval_bounds`` declares free of ``{f >= -level}``; and the share of points with a
-    non-zero bound."""
+def _free_violation(node, p, level, direction, rng, k=12, ahead=False):
+    """Largest ``f + level`` found in the balls (or two-sided line segments; with
+    ``ahead``, the one-sided segments of ``one_sided``) that ``eval_bounds`` declares
+    free of ``{f >= -level}``; and the share of points with a non-zero bound."""
     import drjit as dr
     import mitsuba as mi
+
+    from arches_render.field.node import one_sided
     P = mi.Point3f(*(mi.Float(p[:, i].astype(np.float32)) for i in range(3)))
     dv = None if direction is None else mi.Vector3f(*(float(x) for x in direction))
-    f, (d,) = node.eval_bounds(P, (level,), dv)
+    with one_sided(mi.Bool(True) if ahead else None):
+        f, (d,) = node.eval_bounds(P, (level,), dv)
     dr.eval(f, d)
     d = d.numpy().astype(np.float64)
     np.testing.assert_allclose(f.numpy(), evaluate(node, p), atol=1e-5)
@@ -419,7 +422,7 @@ def _free_violation(node, p, level, direction, rng, k=12):
         rad = d[:, None] * rng.uniform(0.0, 1.0, (sel.sum(), k)) ** (1 / 3) * 0.999
     else:
         dirs = np.broadcast_to(np.asarray(direction, float), (sel.sum(), k, 3))
-        rad = d[:, None] * rng.uniform(-1.0, 1.0, (sel.sum(), k)) * 0.999
+        rad = d[:, None] * rng.uniform(0.0 if ahead else -1.0, 1.0, (sel.sum(), k)) * 0.999
     q = (p[sel, None, :] + dirs * rad[..., None]).reshape(-1, 3)
     return float(evaluate(node, q).max()) + level, sel.mean()
 
@@ -433,7 +436,9 @@ def _free_violation(node, p, level, direction, rng, k=12):
 ])
 def test_level_and_line_bounds_are_free(name, levels):
     """Distance bounds at the levels the sum's caps ask (below a set's threshold) and
-    along lines: no point declared free is in the set, and the bounds are not vacuous."""
+    along lines, both sides and ahead only (``one_sided``: the operators compose the
+    terrain's one-sided lengths with their other bounds): no point declared free is in
+    the set, and the bounds are not vacuous."""
     node = {"sculpted": SCULPTED, "terrain": TERRAIN, "pillars": PILLARS, "hoodoos": HOODOOS,
             "noisy_sum": NOISY}[name]
     rng = np.random.default_rng(21)
@@ -442,9 +447,10 @@ def test_level_and_line_bounds_are_free(name, levels):
         if direction is not None:
             direction = direction / np.linalg.norm(direction)
         for level in levels:
-            worst, share = _free_violation(node, p, level, direction, rng)
-            assert worst < 1e-4, f"{name} level {level}: f + c = {worst:.3g} inside a free region"
-            assert share > 0.3
+            for ahead in ((False,) if direction is None else (False, True)):
+                worst, share = _free_violation(node, p, level, direction, rng, ahead=ahead)
+                assert worst < 1e-4, f"{name} level {level} (ahead: {ahead}): f + c = {worst:.3g} inside a free region"
+                assert share > 0.3
 
 
 def _assert_rays_resolve(node, o, d, ts, max_steps=512):

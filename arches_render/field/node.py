@@ -39,6 +39,16 @@ questions:
     better (heightfields) return more. Two-sided intervals are what over-relaxed
     sphere tracing needs to check that consecutive steps overlap.
 
+    *Ahead.* Inside :func:`one_sided`, the lanes it names may be answered with a
+    length ``d`` free *ahead* only (``0 < s < d``). A tracer asks so where it needs
+    no backward extent (a ray's first point, a verified point), since a ray that
+    leaves a surface has a two-sided length of ~0 there whatever its direction. Every
+    two-sided answer is also a one-sided one, and every composition above (a union
+    as far as its nearest operand, set inclusions, balls) holds for intervals that
+    start at ``p`` as for intervals around it, so operators need not know; only
+    nodes that bound their value along the line answer differently
+    (:mod:`generators.terrain.elevation_line`).
+
     With ``footprint`` (a :class:`~arches_render.field.lod.Footprint`: the ray cone's
     radius at ``p`` and its rate), the value and the bounds are those of the node's
     *footprint field*, where octaves finer than the cone are skipped
@@ -47,6 +57,8 @@ questions:
 """
 
 from __future__ import annotations
+
+import contextlib
 
 import drjit as dr
 import mitsuba as mi
@@ -228,6 +240,32 @@ def cell_index(x, n: int, kind=None):
     mi.UInt32 or ``kind``
     """
     return (kind or mi.UInt32)(clip_index(x, 0.0, n - 1.0))
+
+
+#: The lanes :func:`one_sided` names while a tracer's query is traced (``None``: none).
+_ONE_SIDED = None
+
+
+@contextlib.contextmanager
+def one_sided(lanes):
+    """Trace the ``eval_bounds`` calls inside this block with one-sided answers allowed
+    for ``lanes`` (a per-lane ``mi.Bool``; module docstring, "Ahead").
+
+    Dr.Jit traces the Python of a loop body once into its kernel, so the mask is read
+    by the nodes while the block is traced and selects, per lane, which bound the
+    kernel computes. Nested blocks restore the outer mask when they end.
+    """
+    global _ONE_SIDED
+    outer, _ONE_SIDED = _ONE_SIDED, lanes
+    try:
+        yield
+    finally:
+        _ONE_SIDED = outer
+
+
+def one_sided_lanes():
+    """The lanes of the enclosing :func:`one_sided` block, or ``None`` outside one."""
+    return _ONE_SIDED
 
 
 def hart_bounds(f, levels, lipschitz):

@@ -32,7 +32,7 @@ import numpy as np
 from ..field import gradient
 from ..field.culling import with_culling
 from ..field.lod import Footprint
-from ..field.node import finite_box
+from ..field.node import finite_box, one_sided
 from .march import SECOND_PASS_FACTOR, March, march_result, position_ulps, ray_box, relaxed_step
 
 #: Fraction of the cone's radius that a hit may stay in front of the surface. At a
@@ -151,7 +151,12 @@ class SphereTracer:
         (:func:`~.march.relaxed_step`): ``(march, outcome, r)``, ``r`` the free radius
         the field granted there."""
         t = march.t
-        f, (r,) = self.field.eval_bounds(o + d * t, (0.0,), d, self.footprint(cone, t))
+        # A point reached without a relaxed step (the ray's start, the frontier after a
+        # failed step, a plain step) needs no free length behind it, only ahead: the
+        # overlap test asks a point for what lies behind it only when a relaxed step
+        # led there (field.node, "Ahead"). A ray leaving a surface then steps away at once.
+        with one_sided((march.step <= 0.0) | (march.omega <= 1.0)):
+            f, (r,) = self.field.eval_bounds(o + d * t, (0.0,), d, self.footprint(cone, t))
         march, out = relaxed_step(march, f, r, t_end, self.tolerance(t, cone), self.omega)
         return march, out, r
 

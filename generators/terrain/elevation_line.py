@@ -49,6 +49,16 @@ and ``g < -c'`` on ``|s| < min(rho, G^-1(-v - c'))``: a two-sided free length, a
 over-relaxed march needs (:mod:`arches_render.render.march`). ``G^-1`` is the root
 of a quadratic while ``B0 + K s < B1`` and linear after.
 
+Ahead. On the ray's own side (``0 <= s <= rho``) only the upper ends count:
+``g'(s) <= min(D + K s, E)`` with ``D = min(D_hi, E_hi)``, ``E = E_hi``, so
+``g(s) <= v + G+(s)``, ``G+(s) = int_0^s min(D + K x, E) dx``, and ``g < -c'`` on
+``0 < s < min(rho, d)`` with ``d`` the first root of ``G+(s) = gap = -v - c' > 0``: the
+positive root of ``K s^2 / 2 + D s = gap`` while ``s <= s1 = (E - D) / K``, else
+``s1 + (gap - G+(s1)) / E`` (none when ``E <= 0``). For a ray that climbs away from the
+ground ``D < 0``, and ``d >= 2 |D| / K`` however small the gap: the two-sided length,
+bounded by ``max(D_hi, -D_lo) >= |D_lo|``, is ~``gap / |g'|``, ~0 where the ray starts.
+:func:`arches_render.field.node.one_sided` says when a tracer may use it.
+
 References
 ----------
 Hart, J. C. (1996). Sphere tracing. The Visual Computer 12(10).
@@ -59,6 +69,8 @@ instead of a ball).
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import drjit as dr
 import mitsuba as mi
 import numpy as np
@@ -68,6 +80,21 @@ from arches_render.field.noise import fbm_curvature, fbm_range
 
 #: ``max |d/du smoothstep(u)|``: the taper weight is ``1.5 / taper``-Lipschitz.
 TAPER_SLOPE = 1.5
+
+
+class LineTerms(NamedTuple):
+    """Bounds of ``dv/ds`` on a ray's line within ``|s| <= rho`` (module docstring).
+
+    Both sides: ``|dv/ds| <= min(B0 + K |s|, B1)``. Ahead (``s >= 0``):
+    ``dv/ds <= min(D + K s, E)``, ``D <= E``.
+    """
+
+    B0: object
+    B1: object
+    K: object
+    rho: object
+    D: object
+    E: object
 
 
 def grid_derivative_ranges(H: np.ndarray, dx: float, dy: float) -> list[np.ndarray]:
@@ -170,7 +197,7 @@ class ElevationLineBound:
         -------
         list of mi.Float
         """
-        B0, B1, K, rho = terms if terms is not None else self.derivative_terms(p, u, k, a0, level, footprint)
+        B0, B1, K, rho = (terms if terms is not None else self.derivative_terms(p, u, k, a0, level, footprint))[:4]
         s1 = (B1 - B0) * dr.rcp(K)
         G1 = s1 * (B0 + 0.5 * K * s1)
         out = []
@@ -183,10 +210,41 @@ class ElevationLineBound:
             out.append(dr.minimum(d, rho))
         return out
 
+    @staticmethod
+    def ahead_lengths(v, shifts, terms):
+        """Free lengths *ahead* on the line (``0 < s < d``; module docstring, "Ahead") to
+        each level ``{v >= -shift}``, from the :class:`LineTerms` of the same line.
+
+        Parameters
+        ----------
+        v : mi.Float
+            ``h(p_xy) - p_z``.
+        shifts : sequence of mi.Float or float
+            The levels, as clearances of ``v``.
+        terms : LineTerms
+
+        Returns
+        -------
+        list of mi.Float
+        """
+        D, E, K, rho = terms.D, terms.E, terms.K, terms.rho
+        s1 = (E - D) * dr.rcp(K)            # where D + K s meets E
+        G1 = s1 * (D + 0.5 * K * s1)        # G(s1)
+        out = []
+        for shift in shifts:
+            gap = -v - shift
+            root = dr.sqrt(dr.square(D) + 2.0 * K * dr.maximum(gap, 0.0))
+            # The positive root of K s^2 / 2 + D s = gap, in the form without cancellation.
+            quad = dr.select(D < 0.0, (root - D) * dr.rcp(K), 2.0 * gap * dr.rcp(D + root))
+            lin = dr.select(E > 0.0, s1 + (gap - G1) * dr.rcp(dr.maximum(E, 1e-30)), dr.inf)
+            d = dr.select(quad <= s1, quad, lin)
+            # (gap <= 0: the point is in the level set. A NaN proves nothing: kept.)
+            out.append(dr.select(gap > 0.0, dr.minimum(d, rho), dr.select(dr.isnan(gap), gap, 0.0)))
+        return out
+
     def derivative_terms(self, p, u, k, a0, level, footprint):
-        """``(B0, B1, K, rho)`` of the module docstring: on the line through ``p`` along
-        ``u``, ``|dv/ds| <= min(B0 + K |s|, B1)`` for ``|s| <= rho`` (arguments as
-        :meth:`free_lengths`)."""
+        """The :class:`LineTerms` of the line through ``p`` along ``u`` (module docstring;
+        arguments as :meth:`free_lengths`)."""
         run = dr.sqrt(dr.square(u.x) + dr.square(u.y))
         xlo, xhi, ylo, yhi = (dr.gather(mi.Float, r, k) for r in self._ranges)
         h_lo = dr.minimum(u.x * xlo, u.x * xhi) + dr.minimum(u.y * ylo, u.y * yhi)
@@ -217,8 +275,9 @@ class ElevationLineBound:
             if level is not None:
                 K = K + S * run * rate * self.lac_over_log * dr.rcp(dr.maximum(footprint.radius, 1e-30))
             centre = centre + a0
-        B0 = dr.maximum(h_hi + centre + slack, -(h_lo + centre - slack))
-        B1 = dr.maximum(h_hi - u.z + first, -(h_lo - u.z - first))
-        B0 = dr.minimum(B0, B1)
-        return B0, B1, dr.maximum(K, 1e-30), rho
+        D_lo, D_hi = h_lo + centre - slack, h_hi + centre + slack
+        E_lo, E_hi = h_lo - u.z - first, h_hi - u.z + first
+        B1 = dr.maximum(E_hi, -E_lo)
+        B0 = dr.minimum(dr.maximum(D_hi, -D_lo), B1)
+        return LineTerms(B0, B1, dr.maximum(K, 1e-30), rho, dr.minimum(D_hi, E_hi), E_hi)
 

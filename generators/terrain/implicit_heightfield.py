@@ -97,7 +97,7 @@ from arches_render.backend import variant
 from arches_render.field import Heightfield
 from arches_render.field.heightfield import height_grid
 from arches_render.field.lod import OctaveLOD
-from arches_render.field.node import box_distance, box_gap, box_reach, clip_index, opaque_float
+from arches_render.field.node import box_distance, box_gap, box_reach, clip_index, one_sided_lanes, opaque_float
 from arches_render.field.noise import fbm, fbm_gradient, fbm_lipschitz, fbm_range
 
 from .elevation_line import ElevationLineBound
@@ -278,7 +278,7 @@ class ImplicitHeightfield(Heightfield):
             if line is not None:
                 # Along the line |dv/ds| <= min(B0 + K |s|, B1) within rho (the footprint
                 # field's, grown already): the rate a ray climbs, not the ground's steepest.
-                B0, B1, K, reach = line
+                B0, B1, K, reach = line[:4]
                 Lh = dr.select(rad <= reach, dr.minimum(dr.minimum(B0 + K * rad, B1) * (1.0 + 1e-6), Lh), Lh)
             lo, hi = v - rad * Lh, v + rad * Lh
             ua = dr.select((lo <= 0.0) & (hi >= 0.0), 0.0, dr.minimum(dr.abs(lo), dr.abs(hi))) * self._inv_R
@@ -318,8 +318,13 @@ class ImplicitHeightfield(Heightfield):
         if direction is not None and (levels or radii):
             terms = self._line.derivative_terms(p, direction, k, a0, level, footprint)
         if direction is not None and levels:
-            # Along the ray: second-order bounds of v on the ray's own line.
+            # Along the ray: second-order bounds of v on the ray's own line; ahead only
+            # where the tracer allows it (arches_render.field.node, "Ahead").
             lines = self._line.free_lengths(p, direction, v, k, shifts, a0, level, footprint, terms)
+            lanes = one_sided_lanes()
+            if lanes is not None:
+                ahead = self._line.ahead_lengths(v, shifts, terms)
+                lines = [dr.select(lanes, dr.maximum(a, d), d) for a, d in zip(ahead, lines)]
         ds = []
         for i, (c, shift) in enumerate(zip(levels, shifts)):
             dT = dr.maximum(-v - shift, 0.0) * self._inv_Lh * (1.0 / grow)
