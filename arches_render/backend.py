@@ -24,6 +24,7 @@ This module is a leaf: it imports nothing of arches-render. Our Python plugins
 
 from __future__ import annotations
 
+import contextlib
 import glob
 import os
 import re
@@ -148,8 +149,37 @@ def set_variant(name: str | None = None) -> str:
     if name not in mi.variants():
         raise BackendError(f"Mitsuba variant '{name}' is not available; choose one of {mi.variants()}.")
     mi.set_variant(name)
+    if dr.thread_count() < MIN_IO_THREADS:  # a one-core machine (io_threads)
+        dr.set_thread_count(MIN_IO_THREADS)
     _variant = name
     return name
+
+
+#: The fewest Dr.Jit threads with which Mitsuba's EXR input and output can run (:func:`io_threads`).
+MIN_IO_THREADS = 2
+
+
+@contextlib.contextmanager
+def io_threads():
+    """Hold Dr.Jit's thread pool at :data:`MIN_IO_THREADS` or more inside this block.
+
+    Mitsuba reads and writes EXR files with OpenEXR, whose tasks run on Dr.Jit's thread
+    pool while the calling thread waits for them: with a pool of one thread nothing
+    runs them, and the process hangs for ever in ``mi.Bitmap`` (measured: an
+    environment map read by a scene load on a one-core machine, or in a render job
+    given one thread, as two Dask workers on two cores are). Loads of scene files go
+    through this; renders may then run on one thread (the sweep's Debug renders must).
+    """
+    import drjit as dr
+    n = dr.thread_count()
+    if n >= MIN_IO_THREADS:
+        yield
+        return
+    dr.set_thread_count(MIN_IO_THREADS)
+    try:
+        yield
+    finally:
+        dr.set_thread_count(n)
 
 
 def variant() -> str:

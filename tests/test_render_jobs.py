@@ -136,3 +136,43 @@ def test_render_tile_options_reject_bad_values(tiled, tmp_path, capsys):
         assert exc.value.code == 2
         assert capsys.readouterr().err.strip().splitlines()[-1].startswith("arches-render render: error:")
     assert not out.exists()
+
+
+ONE_CORE = """
+import os, sys
+os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})  # before Dr.Jit starts its pool
+from arches_render.backend import set_variant
+set_variant()
+import drjit as dr
+from arches_render.render.jobs import RenderJob, run_job
+print("threads", dr.thread_count(), flush=True)
+for scene in sys.argv[1:]:  # each scene loaded after a one-thread job
+    rgb, _ = run_job(RenderJob(scene=scene, width=16, height=9, spp=1, aovs=False, threads=1))
+    print("rendered", float(rgb.mean()), dr.thread_count(), flush=True)
+"""
+
+
+def test_scenes_that_read_exr_files_load_on_one_core_and_in_one_thread_jobs(tmp_path):
+    """Mitsuba's EXR reading runs OpenEXR's tasks on Dr.Jit's thread pool and waits for
+    them: with one thread in the pool (a one-core machine, or a job given one thread, as
+    two Dask workers on two cores get) an environment map's load hung for ever. A
+    process pinned to one core renders two such scenes in one-thread jobs, each loaded
+    after the last job left the pool one thread; it hangs (the timeout fails it) without
+    ``backend.io_threads``."""
+    import subprocess
+    import sys
+    from arches_render.imaging.exr import write_exr
+    env = np.zeros((16, 32, 3), np.float32)
+    env[4:6, 10:12] = 50.0
+    env += 0.2
+    write_exr(tmp_path / "sky.exr", env, half=False)
+    lit = FLAT.replace('type = "sunsky"\nelevation = 50.0\nazimuth = 30.0', 'type = "envmap"\nfile = "sky.exr"')
+    assert lit != FLAT
+    scenes = [str(write_scene(tmp_path, lit, "a")), str(write_scene(tmp_path, lit.replace("[0.2, 0.4, 0.6]",
+                                                                                   "[0.6, 0.4, 0.2]"), "b"))]
+    out = subprocess.run([sys.executable, "-c", ONE_CORE, *scenes], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    lines = out.stdout.split("\n")
+    assert lines[0] == "threads 2"  # raised from the one core's one thread
+    rendered = [line.split() for line in lines if line.startswith("rendered")]
+    assert len(rendered) == 2 and all(float(r[1]) > 0 and r[2] == "1" for r in rendered), out.stdout

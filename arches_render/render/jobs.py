@@ -25,7 +25,7 @@ import mitsuba as mi
 import numpy as np
 
 from .. import faults, tomlfile
-from ..backend import set_variant
+from ..backend import io_threads, set_variant
 from ..scene import load_scene, paths
 from .renderer import build_scene, render_layers, set_pixel_spread, tile_projection
 
@@ -136,9 +136,12 @@ def _scene_for(job: RenderJob):
     if key in _CACHE:
         _CACHE.move_to_end(key)
         return _CACHE[key]
-    desc = _desc_for(job)
-    scene = build_scene(desc, job.geometry, job.width, job.height, job.voxel or None, aovs=job.aovs,
-                        crop=job.crop, moments=job.moments)
+    # A job may have left this process one thread (job.threads), with which the EXR
+    # files a scene reads would hang its load (backend.io_threads).
+    with io_threads():
+        desc = _desc_for(job)
+        scene = build_scene(desc, job.geometry, job.width, job.height, job.voxel or None, aovs=job.aovs,
+                            crop=job.crop, moments=job.moments)
     return _remember(_CACHE, _CACHE_SIZE, key, (desc, scene))
 
 
