@@ -197,7 +197,8 @@ class ElevationLineBound:
         -------
         list of mi.Float
         """
-        B0, B1, K, rho = (terms if terms is not None else self.derivative_terms(p, u, k, a0, level, footprint))[:4]
+        terms = terms if terms is not None else self.derivative_terms(p, u, k, a0, level, footprint)
+        B0, B1, K, rho = terms.B0, terms.B1, terms.K, terms.rho
         s1 = (B1 - B0) * dr.rcp(K)
         G1 = s1 * (B0 + 0.5 * K * s1)
         out = []

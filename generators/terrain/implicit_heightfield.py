@@ -278,7 +278,7 @@ class ImplicitHeightfield(Heightfield):
             if line is not None:
                 # Along the line |dv/ds| <= min(B0 + K |s|, B1) within rho (the footprint
                 # field's, grown already): the rate a ray climbs, not the ground's steepest.
-                B0, B1, K, reach = line[:4]
+                B0, B1, K, reach = line.B0, line.B1, line.K, line.rho
                 Lh = dr.select(rad <= reach, dr.minimum(dr.minimum(B0 + K * rad, B1) * (1.0 + 1e-6), Lh), Lh)
             lo, hi = v - rad * Lh, v + rad * Lh
             ua = dr.select((lo <= 0.0) & (hi >= 0.0), 0.0, dr.minimum(dr.abs(lo), dr.abs(hi))) * self._inv_R
