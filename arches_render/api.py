@@ -41,6 +41,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from . import notebook
 from .backend import set_variant
 from .imaging.colour import view_to_uint8
 from .imaging.exposure import exposure_of
@@ -130,6 +131,8 @@ class Lookdev:
         parameter edit and the kernels were compiled before).
     rebuilds : int
         Times the Mitsuba scene was built (1 after :func:`load`).
+    last : numpy.ndarray or None
+        The last :meth:`render` (what a notebook shows of the look).
     """
 
     def __init__(self, path, resolution=None, spp=None, seed=None):
@@ -142,6 +145,7 @@ class Lookdev:
         self.spp, self.seed = spp, seed
         self.compiled = 0
         self.rebuilds = 0
+        self.last = None
         self._build()
 
     # ------------------------------------------------------------------ building
@@ -275,7 +279,7 @@ class Lookdev:
         return True
 
     # ------------------------------------------------------------------ rendering
-    def render(self, path=None, spp=None, seed=None, view="srgb", aovs=False):
+    def render(self, path=None, spp=None, seed=None, view="srgb", aovs=False, on_pass=None):
         """Render the current state.
 
         Parameters
@@ -289,11 +293,14 @@ class Lookdev:
             View transform of the PNG (:data:`arches_render.imaging.colour.VIEWS`).
         aovs : bool
             Render AOV layers into the EXR (builds a second scene once).
+        on_pass : callable, optional
+            ``on_pass(samples_done, beauty)`` after each sample pass, the mean beauty so
+            far (:func:`~arches_render.render.renderer.render_layers`).
 
         Returns
         -------
         numpy.ndarray
-            ``(H, W, 3)`` float32 linear Rec.709.
+            ``(H, W, 3)`` float32 linear Rec.709 (also kept as :attr:`last`).
         """
         s = self.desc.render
         spp = spp or self.spp or s.spp
@@ -302,14 +309,31 @@ class Lookdev:
         scene = self._aov_scene() if aovs else self.scene
         with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
             dr.kernel_history_clear()
-            rgb, layers = render_layers(scene, spp, seed, s.passes)
+            rgb, layers = render_layers(scene, spp, seed, s.passes, on_pass=on_pass)
             hist = dr.kernel_history()
         # A kernel this process has not launched before misses the in-memory
         # cache (whether it was then compiled or loaded from the disk cache).
         self.compiled = sum(1 for k in hist if k["type"] == dr.KernelType.JIT and not k.get("cache_hit", False))
         if path is not None:
             self._write(Path(path), rgb, layers, spp, seed, view)
+        self.last = rgb
         return rgb
+
+    # ------------------------------------------------------------------ notebooks
+    def _repr_png_(self):
+        """Jupyter's picture of the look: its last render (one now if there is none)
+        under the scene's view and exposure (:mod:`arches_render.notebook`)."""
+        return notebook.look_png(self, self.last if self.last is not None else self.render())
+
+    def preview(self, spp=None):
+        """Render and show the image in one notebook output, refined pass by pass
+        (:func:`arches_render.notebook.preview`); returns the render."""
+        return notebook.preview(self, spp)
+
+    def slider(self, key: str, lo: float, hi: float, step: float | None = None):
+        """A notebook slider over ``key`` and the image it re-renders
+        (:func:`arches_render.notebook.slider`)."""
+        return notebook.slider(self, key, lo, hi, step)
 
     def _aov_scene(self):
         key = (id(self.scene), self.rebuilds)

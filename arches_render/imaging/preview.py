@@ -19,6 +19,7 @@ References
 
 from __future__ import annotations
 
+import io
 import os
 import warnings
 from pathlib import Path
@@ -29,7 +30,7 @@ from PIL.PngImagePlugin import PngInfo
 
 from ..atomic import atomic_write
 
-__all__ = ["encode_srgb", "to_srgb8", "write_png"]
+__all__ = ["encode_srgb", "png_bytes", "to_srgb8", "write_png"]
 
 #: PNG chunks that tag the pixels as sRGB (W3C PNG 11.3.2: rendering intent 0,
 #: and the matching gAMA of 1/2.2 for viewers that ignore sRGB).
@@ -130,12 +131,33 @@ def write_png(path: str | os.PathLike, rgb_linear, exposure: float = 0.0) -> Pat
     ----------
     IEC 61966-2-1:1999; W3C PNG Specification (Third Edition), 11.3.2 (``sRGB``).
     """
+    path = Path(path)
+    with atomic_write(path, "wb") as f:
+        _save_png(f, rgb_linear, exposure)
+    return path
+
+
+def png_bytes(rgb_linear, exposure: float = 0.0) -> bytes:
+    """The PNG :func:`write_png` writes, in memory (what a notebook displays).
+
+    Parameters
+    ----------
+    rgb_linear, exposure
+        As for :func:`write_png`.
+
+    Returns
+    -------
+    bytes
+    """
+    buf = io.BytesIO()
+    _save_png(buf, rgb_linear, exposure)
+    return buf.getvalue()
+
+
+def _save_png(f, rgb_linear, exposure):
     a = np.asarray(rgb_linear)
     image = _png_image(a if a.dtype == np.uint8 else to_srgb8(a, exposure))
     info = PngInfo()
     for kind, data in _SRGB_CHUNKS:
         info.add(kind, data)
-    path = Path(path)
-    with atomic_write(path, "wb") as f:
-        image.save(f, format="PNG", pnginfo=info)
-    return path
+    image.save(f, format="PNG", pnginfo=info)

@@ -379,7 +379,8 @@ def pass_seed(seed: int, i: int, stream: int = 0) -> int:
     return base if stream == 0 else (base + int(stream) * 0x9E3779B9) & 0xFFFFFFFF
 
 
-def render_layers(scene, spp: int, seed: int = 0, passes: int = 0, progress=None, stream: int = 0):
+def render_layers(scene, spp: int, seed: int = 0, passes: int = 0, progress=None, stream: int = 0,
+                  on_pass=None):
     """Render the beauty and the integrator's AOVs, averaged over passes.
 
     Parameters
@@ -390,6 +391,9 @@ def render_layers(scene, spp: int, seed: int = 0, passes: int = 0, progress=None
         As for :func:`render_image`.
     stream : int, optional
         Sample stream (frame or tile index) mixed into the pass seeds (:func:`pass_seed`).
+    on_pass : callable, optional
+        ``on_pass(samples_done, beauty)`` after each pass, with the mean ``(H, W, 3)``
+        beauty so far (a progressive preview).
 
     Returns
     -------
@@ -405,6 +409,8 @@ def render_layers(scene, spp: int, seed: int = 0, passes: int = 0, progress=None
         done += n
         if progress:
             progress(done, spp)
+        if on_pass:
+            on_pass(done, (acc[..., :3] / done).astype(np.float32))
     rgb, layers = split_channels((acc / spp).astype(np.float32), names)
     return rgb, layers
 
