@@ -116,6 +116,13 @@ def island_dem():
     return -6.0 + (top + 6.0) * land + noise(X.shape, 2, 2.0, 0.4) * land, cell
 
 
+#: The island's camera, and its sun from the left of the view: raking light makes the
+#: face's flutes and notches cast shadows (with the sun behind the camera, azimuth -125
+#: degrees, the face read as a flat grey wall).
+ISLAND_CAMERA = {"origin": [-100.0, -100.0, 12.0], "target": [-34.0, -46.0, 9.0], "fov": 50.0}
+ISLAND_SUN = {"elevation": 24.0, "azimuth": 170.0}
+
+
 def coastal_cliff():
     """Fig. 23 (2019): chalk cliffs after three steps of sea erosion."""
     H, cell = island_dem()
@@ -124,10 +131,7 @@ def coastal_cliff():
     glossy_water(doc)
     doc = finish(doc, name, "Fig. 23 (Paris et al. 2019): chalk cliffs after three steps of sea erosion: "
                  "notches, caves, a sea stack and an arch through the headland's neck",
-                 {"origin": [-100.0, -100.0, 12.0], "target": [-34.0, -46.0, 9.0], "fov": 50.0},
-                 # Raking light from the left of the view: the face's flutes and notches cast
-                 # shadows (with the sun behind the camera, -125 degrees, it was a flat grey wall).
-                 {"elevation": 24.0, "azimuth": 170.0},
+                 ISLAND_CAMERA, ISLAND_SUN,
                  {"haze": {"density": 0.0015, "height": 25.0}}, max_depth=3)
     write(name, doc, "Gallery: Fig. 23 of Paris et al. 2019, coastal cliff (examples/make_gallery_scenes.py)")
 
@@ -449,8 +453,7 @@ def sea_cliff_steps():
         glossy_water(doc)
         doc = finish(doc, name, f"Fig. 11 (Paris et al. 2019): sea cliffs after {steps} step"
                      f"{'s' if steps > 1 else ''} of sea erosion",
-                     {"origin": [-100.0, -100.0, 12.0], "target": [-34.0, -46.0, 9.0], "fov": 50.0},
-                     {"elevation": 24.0, "azimuth": -125.0},
+                     ISLAND_CAMERA, ISLAND_SUN,
                      {"haze": {"density": 0.0015, "height": 25.0}}, max_depth=3)
         doc["render"]["resolution"] = [640, 360]
         write(name, doc, f"Gallery: Fig. 11 of Paris et al. 2019, sea erosion step {steps} "
