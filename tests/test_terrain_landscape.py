@@ -169,6 +169,13 @@ def test_coastal_dem_of_hundreds_of_km_renders_a_landscape(tmp_path, capsys):
     assert rc == 0, err
     assert "preset sea" in stdout
     desc = load_scene(out)
+    # The air thinned to the tile's scale (the default air's ~20 km range was a fog bank
+    # over the overview): its meteorological range is the tile's width.
+    import tomllib
+    from arches_render.generators.terrain.scene_writer import HAZE_RANGE_M
+    x0, y0, x1, y1 = tomllib.loads(out.read_text())["nodes"]["terrain"]["extent"]
+    width = max(x1 - x0, y1 - y0)
+    assert width > 200e3 and abs(desc.atmosphere.density * width - HAZE_RANGE_M) < 0.01 * HAZE_RANGE_M
     _check_shots(desc, _render_all_cameras(desc))
 
 

@@ -20,7 +20,10 @@ Ground and water
     The far field (``[[far_field]]``, :mod:`.far_field`) continues the terrain to
     the horizon in the same material, and the sea with it where the sea reaches
     the tile's border; the water surfaces of the tile (:mod:`.water`) are a mesh.
-    Tiles of a kilometre or more get an ``[atmosphere]``: distance reads as haze.
+    Tiles of a kilometre or more get an ``[atmosphere]``: distance reads as haze,
+    thinned on tiles wider than :data:`HAZE_RANGE_M` so that the air's meteorological
+    range is the tile's width (default air, turbidity 3, sees about 20 km: a 220 km
+    tile's overview was a fog bank).
 Material
     The ``terrain`` triplanar preset (rock, sand, grass, snow) with its layer
     heights rescaled to the DEM's elevation range, so that a 6 km DEM is not all
@@ -43,6 +46,10 @@ from arches_render.materials.masks import terrain_look
 from .presets import PRESETS
 
 __all__ = ["toml_text", "frame_camera", "landscape_material", "sun_for", "scene_document", "LANDFORM_NAMES"]
+
+#: Meteorological range of the default air (turbidity 3; :mod:`arches_render.render.atmosphere`),
+#: metres: wider tiles get thinner air (``density = HAZE_RANGE_M / width``).
+HAZE_RANGE_M = 20000.0
 
 #: Camera names of the close shots, per preset.
 LANDFORM_NAMES = {"sea": "sea_cave", "river": "undercut", "karst": "tunnel", "hoodoos": "hoodoos",
@@ -290,7 +297,7 @@ def scene_document(result, name, work_dir, progress=None, close=3):
             far.update(sea_level=float(water.sea_level), water_material="water")
     doc["far_field"] = [far]
     if size >= 1000.0:
-        doc["atmosphere"] = {}
+        doc["atmosphere"] = {} if size <= HAZE_RANGE_M else {"density": round(HAZE_RANGE_M / size, 4)}
     doc["nodes"] = result.tables
     lines = [f"Terrain amplification (Paris et al. 2019): {stats['nodes']} nodes, {stats['primitives']} primitives, "
              f"{stats['memory_bytes'] / 1e6:.2f} MB",
