@@ -367,3 +367,33 @@ seed = 2
     sphere = render_image(scene, 16, seed=1)
     assert abs(cast.mean() / sphere.mean() - 1) < 0.01
     assert flip_error(sphere, cast)[1] < 0.03
+
+
+def test_kernels_do_not_depend_on_where_numpy_put_the_arrays():
+    """``mi.Float(ndarray)`` wraps numpy's memory, and Dr.Jit emits a packet gather
+    (four floats at once) only from 64-byte-aligned memory and aligned vector loads only
+    from aligned inputs; numpy aligns to 16 bytes. A heightfield's patch corners and a
+    field evaluation's points went through plain conversions, so a scene traced one of
+    several kernels by chance and a warm kernel cache missed (seconds of LLVM).
+    ``jit_floats`` copies into aligned memory: the same kernel at every offset."""
+    from arches_render.field.node import jit_floats, jit_points
+    base = np.arange(64, dtype=np.float32)
+
+    def kernels(offset):
+        buf = np.zeros(64 + 16, np.float32)
+        a = buf[offset:offset + 64]
+        a[:] = base
+        with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
+            dr.kernel_history_clear()
+            v = dr.gather(mi.Vector4f, jit_floats(a), mi.UInt32(0, 1, 2))
+            p = jit_points(a[:63].reshape(-1, 3))
+            w = p.x * 2.0 + p.y - p.z
+            dr.eval(v, w)
+            jit = [k for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT]
+        assert np.allclose(v.numpy(), base[:12].reshape(3, 4).T)
+        return {k["hash"] for k in jit}, [k["ir"].getvalue() for k in jit]
+
+    hashes, irs = kernels(0)
+    assert any("gather_4x" in ir for ir in irs), "the Vector4f gather is not a packet gather"
+    for offset in range(1, 8):
+        assert kernels(offset)[0] == hashes, f"at an offset of {offset * 4} bytes: other kernels"

@@ -73,6 +73,36 @@ def opaque_float(value):
     return dr.opaque(mi.Float, float(value))
 
 
+def jit_floats(values):
+    """``values`` as a flat ``mi.Float`` in 64-byte-aligned memory.
+
+    ``mi.Float(ndarray)`` wraps the array's memory rather than copying it, and the
+    code Dr.Jit generates depends on that memory's alignment: an aligned input is
+    loaded with aligned vector loads, an unaligned one byte by byte, and a packet
+    gather (``dr.gather(mi.Vector4f, ...)``: four adjacent floats at once) is emitted
+    only from 64-byte-aligned memory. numpy aligns to 16 bytes, so where ``malloc``
+    happened to put an array decided the kernel: the same scene traced one of two
+    render kernels from one process to the next (four, with two such arrays; a field
+    evaluation on numpy points one of eight), and a warm kernel cache missed whenever
+    another came up (seconds of LLVM for a render kernel). An aligned copy makes the
+    kernel one.
+    """
+    variant()
+    a = np.ascontiguousarray(values, dtype=np.float32).reshape(-1)
+    if a.ctypes.data % 64:
+        buf = np.empty(a.size + 16, np.float32)
+        start = (-buf.ctypes.data % 64) // 4
+        buf[start:start + a.size] = a
+        a = buf[start:start + a.size]
+    return mi.Float(a)
+
+
+def jit_points(points):
+    """``(N, 3)`` numpy positions as an ``mi.Point3f`` of aligned coordinates (:func:`jit_floats`)."""
+    points = np.asarray(points).reshape(-1, 3)
+    return mi.Point3f(*(jit_floats(points[:, i]) for i in range(3)))
+
+
 def opaque_point(value):
     """A 3-vector parameter as an opaque ``mi.Point3f``."""
     variant()
@@ -351,8 +381,7 @@ def evaluate(node: Node, points: np.ndarray, batch: int = 1 << 20) -> np.ndarray
     out = np.empty(len(pts), dtype=np.float32)
     for s in range(0, len(pts), batch):
         chunk = pts[s:s + batch]
-        p = mi.Point3f(mi.Float(chunk[:, 0]), mi.Float(chunk[:, 1]), mi.Float(chunk[:, 2]))
-        v = node.eval(p)
+        v = node.eval(jit_points(chunk))
         dr.eval(v)
         out[s:s + len(chunk)] = v.numpy()
     return out

@@ -64,7 +64,7 @@ import numpy as np
 from ..backend import variant
 from .brick_grid import BRICK, NO_SLOT, BrickLayout
 from .local_slopes import eval_local
-from .node import cell_index, opaque_float
+from .node import cell_index, jit_points, opaque_float
 
 __all__ = ["SurfaceCells", "FOOTPRINT_CLASSES", "LEVEL_LADDER"]
 
@@ -128,7 +128,7 @@ def classify(root, centres, edge, radii, slack=0.0):
     for s in range(0, n, BATCH):
         c = np.ascontiguousarray(centres[s:s + BATCH], dtype=np.float32)
         m = len(c)
-        p = mi.Point3f(*(mi.Float(c[:, i]) for i in range(3)))
+        p = jit_points(c)
         f, ds, (slope,) = eval_local(root, p, LEVEL_LADDER, None, None, (R,))
         f_min, f_max = root.box_range(p - half, p + half)
         errors = [root.local_lod_error(p, R, rho) + slack for rho in radii]

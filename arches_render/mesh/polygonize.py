@@ -28,12 +28,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import drjit as dr
-import mitsuba as mi
 import numpy as np
 
 from ..atomic import atomic_write
 from ..backend import variant
 from ..field import Node, evaluate
+from ..field.node import jit_points
 
 
 @dataclass
@@ -85,7 +85,7 @@ def classify_blocks(node: Node, lo, voxel, nblocks):
     centres = lo + (idx * BLOCK + (BLOCK - 1) / 2.0) * voxel
     # Certify a ball of the block's half-diagonal plus one voxel.
     radius = (np.sqrt(3.0) * (BLOCK - 1) / 2.0 + np.sqrt(3.0)) * voxel
-    p = mi.Point3f(*(mi.Float(centres[:, i].astype(np.float32)) for i in range(3)))
+    p = jit_points(centres)
     f, (d,) = node.eval_bounds(p, (0.0,))
     dr.eval(f, d)
     f, d = f.numpy(), d.numpy()

@@ -47,7 +47,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..field.heightfield_mipmap import MaxMipmap
-from ..field.node import cell_index
+from ..field.node import cell_index, jit_floats
 
 
 @dataclass
@@ -107,7 +107,7 @@ class MipmapTraversal:
         self._max = mi.Float(self.mipmap.max_flat)
         self._min = mi.Float(self.mipmap.min_flat)
         self._offsets = [int(v) for v in self.mipmap.offsets]
-        self._corners = mi.Float(self.mipmap.corners.ravel())
+        self._corners = jit_floats(self.mipmap.corners)  # one packet gather per patch
         # The field's own arrays and parameters: the patch test repeats its arithmetic.
         self._x0, self._y0 = hf._x0, hf._y0
         self._inv_dx, self._inv_dy = hf._inv_dx, hf._inv_dy

@@ -82,7 +82,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from arches_render.field.node import Node, box_distance, cell_index, opaque_float
+from arches_render.field.node import Node, box_distance, cell_index, jit_floats, opaque_float
 from arches_render.field.noise import corner_hash, fade, fbm_lipschitz, fbm_range, grad_dot
 from arches_render.field.operators import smooth_max
 
@@ -235,9 +235,8 @@ class BlockField(Node):
                                            np.concatenate(prios), res ** 3))
         self.max_per_cell, self.list_len = int(count.max()), len(index)
         self._start, self._count, self._index = mi.UInt32(start), mi.UInt32(count), mi.UInt32(index)
-        f32 = lambda x: mi.Float(np.ascontiguousarray(x, dtype=np.float32))  # noqa: E731
         # Interleaved (u_x, u_y, u_z, w) per plane: one packet gather per plane.
-        self._planes = f32(np.hstack([tile.normals, tile.offsets[:, None]]).reshape(-1))
+        self._planes = jit_floats(np.hstack([tile.normals, tile.offsets[:, None]]))
         self._pstart, self._pcount = mi.UInt32(tile.start), mi.UInt32(tile.count)
         self._s, self._inv_s = opaque_float(s), opaque_float(1.0 / s)
         self._inv_cell = opaque_float(1.0 / cell)
