@@ -56,18 +56,20 @@ def test_scene_cache_sees_edits_of_files_the_scene_names(tmp_path):
 
 def test_modes_of_one_scene_load_and_polygonize_it_once(tmp_path, monkeypatch):
     """Field and mesh, with and without AOVs: one load of the scene (its generators run
-    once) and one marching-cubes mesh; each mode renders as from a cold process."""
+    once), one marching-cubes mesh and one built scene per geometry (the modes with and
+    without AOVs differ by their integrator only); each mode renders as from a cold process."""
     from arches_render.render import jobs, renderer
     from arches_render.render.jobs import RenderJob, clear_cache, run_job
     scene = write_scene(tmp_path, FLAT, "flat")
-    loads, meshes = [], []
-    load, polygonize = jobs.load_scene, renderer.polygonize
+    loads, meshes, builds = [], [], []
+    load, polygonize, build = jobs.load_scene, renderer.polygonize, jobs.build_scene
     monkeypatch.setattr(jobs, "load_scene", lambda path: loads.append(path) or load(path))
+    monkeypatch.setattr(jobs, "build_scene", lambda *a, **k: builds.append(a[1]) or build(*a, **k))
     monkeypatch.setattr(renderer, "polygonize", lambda *a, **k: meshes.append(a) or polygonize(*a, **k))
     clear_cache()
     modes = [dict(geometry=g, aovs=a) for g in ("field", "mesh") for a in (True, False)]
     warm = [run_job(RenderJob(scene=str(scene), width=32, height=18, spp=1, **m)) for m in modes]
-    assert len(loads) == 1 and len(meshes) == 1
+    assert len(loads) == 1 and len(meshes) == 1 and builds == ["field", "mesh"]
     for m, (rgb, layers) in zip(modes, warm):
         clear_cache()
         cold_rgb, cold_layers = run_job(RenderJob(scene=str(scene), width=32, height=18, spp=1, **m))

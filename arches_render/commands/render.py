@@ -19,7 +19,7 @@ from ..render.denoise import denoise
 from ..render.distributed import dask_client, render_tiled
 from ..render.jobs import RenderJob, job_clip, prime_cache, run_job, sensor_clip
 from ..render.output import render_header, write_render
-from ..render.renderer import build_scene
+from ..render.renderer import build_scene, load_materials
 from ..scene import load_scene
 from . import (Progress, UsageError, bounded_int, check_render_memory, output_file, positive_float,
                resolution, scene_argument, voxel_errors, writable_output)
@@ -89,11 +89,12 @@ def run(args) -> int:
         # Build here from the scene already loaded (generators run once; mesh mode
         # polygonizes with a bar); the job then finds the scene built.
         poly = Progress("polygonize", "slab", args.quiet) if geometry == "mesh" and desc.field else None
+        bsdfs = load_materials(desc)
         with voxel_errors(args, desc):
-            scene = build_scene(desc, geometry, width, height, args.voxel, progress=poly, aovs=aovs)
+            scene = build_scene(desc, geometry, width, height, args.voxel, progress=poly, aovs=aovs, bsdfs=bsdfs)
         if poly:
             poly.close()
-        prime_cache(job, desc, scene)
+        prime_cache(job, desc, scene, bsdfs)
         bar = Progress(f"render {desc.name}", "spp", args.quiet)
         img, layers = run_job(job, bar)
         clip = sensor_clip(scene)

@@ -9,7 +9,8 @@ same bits there as here: serial runs and Dask workers call the same
 the kernels), so a worker that renders many frames builds and compiles once; an
 edit of the scene file or of any file it names builds anew. The camera of a frame
 is applied as a parameter edit (``sensor.to_world``, ``sensor.x_fov``), which
-re-uses the compiled kernels.
+re-uses the compiled kernels. A job with AOVs and one without share the built
+scene and differ by its integrator (:func:`~arches_render.render.renderer.scene_integrator`).
 """
 
 from __future__ import annotations
@@ -27,7 +28,8 @@ import numpy as np
 from .. import faults, tomlfile
 from ..backend import io_threads, set_variant
 from ..scene import load_scene, paths
-from .renderer import build_scene, render_layers, set_pixel_spread, tile_projection
+from .renderer import (build_scene, load_materials, render_layers, scene_integrator, set_pixel_spread,
+                       tile_projection)
 
 __all__ = ["RenderJob", "run_job", "clear_cache", "scene_inputs", "sensor_clip", "job_clip"]
 
@@ -132,30 +134,48 @@ def _desc_for(job: RenderJob):
 
 
 def _scene_for(job: RenderJob):
-    key = _key(job)
-    if key in _CACHE:
+    """``(desc, scene, integrator)`` for ``job``: the scene from this process's cache or
+    built, with the integrator of the job's AOVs (the scene's own, or another made for
+    it and kept with it)."""
+    key, outputs = _key(job), _outputs(job)
+    entry = _CACHE.get(key)
+    if entry is not None:
         _CACHE.move_to_end(key)
-        return _CACHE[key]
+        desc, scene, bsdfs, integrators = entry
+        if outputs not in integrators and bsdfs is not None:
+            integrators[outputs] = scene_integrator(scene, desc, job.geometry, bsdfs, *outputs, width=job.width)
+        if outputs in integrators:
+            return desc, scene, integrators[outputs]
     # A job may have left this process one thread (job.threads), with which the EXR
     # files a scene reads would hang its load (backend.io_threads).
     with io_threads():
         desc = _desc_for(job)
+        bsdfs = load_materials(desc)
         scene = build_scene(desc, job.geometry, job.width, job.height, job.voxel or None, aovs=job.aovs,
-                            crop=job.crop, moments=job.moments)
-    return _remember(_CACHE, _CACHE_SIZE, key, (desc, scene))
+                            crop=job.crop, bsdfs=bsdfs, moments=job.moments)
+    _remember(_CACHE, _CACHE_SIZE, key, (desc, scene, bsdfs, {outputs: scene.integrator()}))
+    return desc, scene, scene.integrator()
 
 
-def prime_cache(job: RenderJob, desc, scene) -> None:
-    """Hand this process's cache a scene already built for ``job`` (e.g. with a progress bar)."""
-    _CACHE[_key(job)] = (desc, scene)
+def prime_cache(job: RenderJob, desc, scene, bsdfs=None) -> None:
+    """Hand this process's cache a scene already built for ``job`` (e.g. with a progress bar).
+
+    ``bsdfs``: the materials it was built with (:func:`~arches_render.render.renderer.load_materials`);
+    without them a job with other AOVs builds its own scene."""
+    _CACHE[_key(job)] = (desc, scene, bsdfs, {_outputs(job): scene.integrator()})
 
 
 def _key(job: RenderJob) -> tuple:
     path = Path(job.scene).resolve()
-    # Tiles of one size share a scene: run_job points its camera at each window.
+    # Tiles of one size share a scene: run_job points its camera at each window. Jobs
+    # with and without AOVs share it too: only the integrator differs (_outputs).
     window = None if job.crop is None else tuple(int(v) for v in job.crop[2:])
-    return (str(path), scene_inputs(path), job.width, job.height, job.geometry, job.aovs, job.moments, window,
-            job.voxel, job.allow)
+    return (str(path), scene_inputs(path), job.width, job.height, job.geometry, window, job.voxel, job.allow)
+
+
+def _outputs(job: RenderJob) -> tuple:
+    """``(aovs, moments)``: what the job's integrator returns besides the beauty."""
+    return (bool(job.aovs or job.moments), bool(job.moments))
 
 
 def scene_inputs(path) -> str:
@@ -214,12 +234,13 @@ def _named_files(value, base: Path):
             pass  # not a path this system can name
 
 
-def set_camera(scene, origin, target, up, fov, image=None) -> None:
+def set_camera(scene, origin, target, up, fov, image=None, integrator=None) -> None:
     """Move a built scene's camera (a parameter edit: no kernel is recompiled).
 
     ``image = (width, height, crop)``: the scene renders the window ``crop`` of a
     ``width x height`` image (its film is the window's size, see
     :func:`arches_render.render.renderer.tile_projection`); ``crop`` may be ``None``.
+    ``integrator``: the one the scene will render with, if not its own (its ray cones).
     """
     params = mi.traverse(scene)
     params["sensor.to_world"] = mi.AffineTransform4f(
@@ -233,7 +254,7 @@ def set_camera(scene, origin, target, up, fov, image=None) -> None:
     params["sensor.principal_point_offset_x"] = float(offset[0])
     params["sensor.principal_point_offset_y"] = float(offset[1])
     params.update()
-    set_pixel_spread(scene, float(fov), width)
+    set_pixel_spread(scene, float(fov), width, integrator)
 
 
 def sensor_clip(scene) -> tuple[float, float]:
@@ -253,7 +274,7 @@ def job_clip(job: RenderJob) -> tuple[float, float]:
     workers.
     """
     set_variant()
-    _, scene = _scene_for(job.with_(crop=None, stream=0))
+    _, scene, _ = _scene_for(job.with_(crop=None, stream=0))
     return sensor_clip(scene)
 
 
@@ -277,8 +298,9 @@ def run_job(job: RenderJob, progress=None):
     with _RUN_LOCK:
         if job.threads:
             dr.set_thread_count(int(job.threads))
-        desc, scene = _scene_for(job)
+        desc, scene, integrator = _scene_for(job)
         cam = job.camera or (desc.camera.origin, desc.camera.target, desc.camera.up, desc.camera.fov)
-        set_camera(scene, *cam, image=(job.width, job.height, job.crop))
-        rgb, layers = render_layers(scene, job.spp, job.seed, job.passes, progress, stream=job.stream)
+        set_camera(scene, *cam, image=(job.width, job.height, job.crop), integrator=integrator)
+        rgb, layers = render_layers(scene, job.spp, job.seed, job.passes, progress, stream=job.stream,
+                                    integrator=integrator)
     return np.ascontiguousarray(rgb), layers

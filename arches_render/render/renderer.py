@@ -196,7 +196,7 @@ def attach_material_nodes(bsdf, desc, name) -> None:
         bsdf.set_node(role, desc.field if node == FIELD_ROOT else node)
 
 
-def set_pixel_spread(scene, fov=None, width=None) -> None:
+def set_pixel_spread(scene, fov=None, width=None, integrator=None) -> None:
     """Tell every triplanar BSDF of a built scene, and the integrator, the camera's pixel size
     (the detail footprint and the camera rays' cones).
 
@@ -207,6 +207,8 @@ def set_pixel_spread(scene, fov=None, width=None) -> None:
         Horizontal field of view in degrees (default: the sensor's).
     width : int, optional
         Full image width in pixels (default: the film's).
+    integrator : mi.Integrator, optional
+        The integrator to tell (default: the scene's; see :func:`scene_integrator`).
 
     Notes
     -----
@@ -218,10 +220,11 @@ def set_pixel_spread(scene, fov=None, width=None) -> None:
         fov = float(mi.traverse(sensor)["x_fov"][0])
     width = int(sensor.film().size()[0]) if width is None else int(width)
     spread = pixel_spread(fov, width)
-    if hasattr(scene.integrator(), "set_pixel_angle"):  # the field's ray cones (level of detail)
-        scene.integrator().set_pixel_angle(spread)
+    integrator = integrator or scene.integrator()
+    if hasattr(integrator, "set_pixel_angle"):  # the field's ray cones (level of detail)
+        integrator.set_pixel_angle(spread)
     bsdfs = [shape.bsdf() for shape in scene.shapes()]
-    bsdfs.append(getattr(scene.integrator(), "field_bsdf", None))
+    bsdfs.append(getattr(integrator, "field_bsdf", None))
     done = set()
     for bsdf in bsdfs:
         if bsdf is None or id(bsdf) in done or not hasattr(bsdf, "pixel_spread"):
@@ -304,31 +307,13 @@ def build_scene(desc, geometry=None, width=None, height=None, voxel=None, progre
             for k, shape in enumerate(item.shapes(bsdfs)):
                 d[f"{item.name}_{k}"] = shape
     field_bsdf = bsdfs[desc.field_material] if desc.field is not None else None
-    atmosphere = getattr(desc, "atmosphere", None)
-    if geometry in ("mesh", "sdfgrid") or desc.field is None:
-        # The field's material shades its mesh once per vertex, its cavity term at camera
-        # hits only, as on the field: only implicit_path knows how (Mitsuba's path shades
-        # twice per vertex, the cavity's march included).
-        shades = hasattr(field_bsdf, "shade")
-        ours = aovs or atmosphere is not None or shades
-        d["integrator"] = {"type": "implicit_path" if ours else "path", "max_depth": s.max_depth,
-                           "rr_depth": s.rr_depth}
-        if aovs:
-            d["integrator"].update(aovs=True, moments=bool(moments))
-        if desc.field is not None and geometry == "sdfgrid":
-            d["field_sdf"] = field_sdfgrid_shape(desc, field_bsdf, voxel)
-        elif desc.field is not None:
-            d["field_mesh"], _ = field_mesh_shape(desc, field_bsdf, voxel, progress)
-        scene = mi.load_dict(d)
-        if ours and shades:
-            scene.integrator().attach_material(field_bsdf)
-    else:
-        d["integrator"] = {"type": "implicit_path", "max_depth": s.max_depth, "rr_depth": s.rr_depth,
-                           "eps": s.eps, "omega": s.omega, "max_steps": s.max_steps,
-                           "surface_cells": s.surface_cells, "lod": s.lod,
-                           "aovs": bool(aovs), "moments": bool(moments)}
-        scene = mi.load_dict(d)
-        scene.integrator().attach(desc.field, field_bsdf)
+    d["integrator"] = integrator_dict(desc, geometry, field_bsdf, aovs, moments)
+    if desc.field is not None and geometry == "sdfgrid":
+        d["field_sdf"] = field_sdfgrid_shape(desc, field_bsdf, voxel)
+    elif desc.field is not None and geometry == "mesh":
+        d["field_mesh"], _ = field_mesh_shape(desc, field_bsdf, voxel, progress)
+    scene = mi.load_dict(d)
+    attach_field(scene.integrator(), desc, geometry, field_bsdf)
     # Clip planes for the whole scene, meshes included (a far-field ring reaches the
     # horizon): an edit before the first render compiles nothing more.
     near, far = clip_planes(*scene_box(desc, scene.bbox()))
@@ -340,8 +325,78 @@ def build_scene(desc, geometry=None, width=None, height=None, voxel=None, progre
     return scene
 
 
-def attach_atmosphere(scene, desc) -> None:
-    """Give a built scene's integrator the atmosphere of ``desc`` (if it has one).
+def integrator_dict(desc, geometry, field_bsdf=None, aovs=False, moments=False) -> dict:
+    """The integrator :func:`build_scene` gives a scene of ``desc`` in mode ``geometry``.
+
+    Field mode: ``implicit_path`` with the scene's tracer settings. Mesh mode (and a
+    scene without a field): Mitsuba's ``path`` unless AOVs, an atmosphere or a field
+    material that shades its mesh once per vertex (``field_bsdf.shade``: its cavity
+    term at camera hits only, as on the field) need ``implicit_path`` (Mitsuba's
+    ``path`` shades twice per vertex, the cavity's march included, and knows no fog).
+    """
+    s = desc.render
+    aovs = aovs or moments
+    if geometry in ("mesh", "sdfgrid") or desc.field is None:
+        ours = aovs or getattr(desc, "atmosphere", None) is not None or hasattr(field_bsdf, "shade")
+        d = {"type": "implicit_path" if ours else "path", "max_depth": s.max_depth, "rr_depth": s.rr_depth}
+        if aovs:
+            d.update(aovs=True, moments=bool(moments))
+        return d
+    return {"type": "implicit_path", "max_depth": s.max_depth, "rr_depth": s.rr_depth,
+            "eps": s.eps, "omega": s.omega, "max_steps": s.max_steps,
+            "surface_cells": s.surface_cells, "lod": s.lod, "aovs": bool(aovs), "moments": bool(moments)}
+
+
+def attach_field(integrator, desc, geometry, field_bsdf) -> None:
+    """Give an integrator of :func:`integrator_dict` the field (field mode) or the field
+    material that shades its mesh (mesh mode, ``implicit_path`` only)."""
+    if desc.field is None:
+        return
+    if geometry not in ("mesh", "sdfgrid"):
+        integrator.attach(desc.field, field_bsdf)
+    elif hasattr(field_bsdf, "shade") and hasattr(integrator, "attach_material"):
+        integrator.attach_material(field_bsdf)
+
+
+def scene_integrator(scene, desc, geometry, bsdfs, aovs=False, moments=False, width=None):
+    """Another integrator for a scene built by :func:`build_scene`: the one it would have
+    had if built with ``aovs`` and ``moments``, for ``render_layers(scene, ...,
+    integrator=...)``.
+
+    The shapes of a scene do not depend on its AOVs (only the integrator does), so one
+    built scene serves a job with AOVs and one without: building it again cost its
+    meshes' BVH, a rock pile's meshes and, in mesh mode, the field's mesh upload (the
+    scene sweep's builds besides polygonization: 60 -> 28 s on one core).
+
+    Parameters
+    ----------
+    scene : mi.Scene
+    desc : SceneDescription
+        The description ``scene`` was built from.
+    geometry : str
+        The mode it was built in.
+    bsdfs : dict
+        The materials it was built with (:func:`load_materials`).
+    aovs, moments : bool
+        As for :func:`build_scene`.
+    width : int, optional
+        Full image width in pixels (the ray cones); default the film's.
+
+    Returns
+    -------
+    mi.Integrator
+    """
+    ensure_registered()
+    field_bsdf = bsdfs[desc.field_material] if desc.field is not None else None
+    integrator = mi.load_dict(integrator_dict(desc, geometry, field_bsdf, aovs, moments))
+    attach_field(integrator, desc, geometry, field_bsdf)
+    attach_atmosphere(scene, desc, integrator)
+    set_pixel_spread(scene, desc.camera.fov, width, integrator)
+    return integrator
+
+
+def attach_atmosphere(scene, desc, integrator=None) -> None:
+    """Give a built scene's integrator (or ``integrator``) the atmosphere of ``desc`` (if it has one).
 
     The fogged box is the scene's bounding box (meshes) joined with the field's
     bounds, the same in field and mesh mode. Call again after editing lights or
@@ -356,7 +411,7 @@ def attach_atmosphere(scene, desc) -> None:
         flo, fhi = desc.field.bounds()
         lo = np.minimum(lo, flo) if bbox.valid() else np.asarray(flo, np.float64)
         hi = np.maximum(hi, fhi) if bbox.valid() else np.asarray(fhi, np.float64)
-    scene.integrator().attach_atmosphere(Atmosphere.for_scene(settings, desc.lights, (lo, hi)))
+    (integrator or scene.integrator()).attach_atmosphere(Atmosphere.for_scene(settings, desc.lights, (lo, hi)))
 
 
 def plan_passes(spp: int, passes: int = 0) -> list[int]:
@@ -380,7 +435,7 @@ def pass_seed(seed: int, i: int, stream: int = 0) -> int:
 
 
 def render_layers(scene, spp: int, seed: int = 0, passes: int = 0, progress=None, stream: int = 0,
-                  on_pass=None):
+                  on_pass=None, integrator=None):
     """Render the beauty and the integrator's AOVs, averaged over passes.
 
     Parameters
@@ -394,6 +449,8 @@ def render_layers(scene, spp: int, seed: int = 0, passes: int = 0, progress=None
     on_pass : callable, optional
         ``on_pass(samples_done, beauty)`` after each pass, with the mean ``(H, W, 3)``
         beauty so far (a progressive preview).
+    integrator : mi.Integrator, optional
+        Render with this integrator instead of the scene's (:func:`scene_integrator`).
 
     Returns
     -------
@@ -401,10 +458,11 @@ def render_layers(scene, spp: int, seed: int = 0, passes: int = 0, progress=None
         ``(H, W, 3)`` float32 beauty and ``{layer: (array, channel letters)}``
         (see :func:`arches_render.render.aovs.split_channels`).
     """
-    names = list(scene.integrator().aov_names())
+    names = list((integrator or scene.integrator()).aov_names())
     acc, done = None, 0
     for i, n in enumerate(plan_passes(spp, passes)):
-        img = mi.render(scene, spp=n, seed=pass_seed(seed, i, stream)).numpy().astype(np.float64)
+        img = mi.render(scene, spp=n, seed=pass_seed(seed, i, stream), integrator=integrator)
+        img = img.numpy().astype(np.float64)
         acc = img * n if acc is None else acc + img * n
         done += n
         if progress:
