@@ -23,7 +23,9 @@ libLLVM Dr.Jit loads), which tests do when they need it.
 
 from __future__ import annotations
 
+import gc
 import os
+import sys
 from pathlib import Path
 
 import pytest
@@ -37,6 +39,27 @@ def pytest_addoption(parser):
     parser.addoption("--update-goldens", action="store_true", default=False,
                      help="re-render golden references and re-calibrate their thresholds instead of "
                           "only checking against them (writes golden/NAME.exr and golden/NAME.json)")
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _no_scenes_from_earlier_files():
+    """Each test file starts with no scene of an earlier file alive in this process.
+
+    Dr.Jit's kernels depend on the registry ids of the objects they dispatch over (BSDFs,
+    shapes, emitters), and a new object takes the lowest free id: a scene built while an
+    earlier file's scenes were still cached (the job cache keeps four) or awaiting the
+    garbage collector traced other kernels than the same scene built in a fresh process,
+    and missed the warm kernel cache (an LLVM compile of seconds: test_exposure's render
+    traced 097a2.. alone, b6b45.. after test_render_jobs). Which files run before which,
+    in which pytest-xdist worker, changes from run to run; with the caches cleared and the
+    cycles collected here, a file's kernels are its own.
+    """
+    jobs = sys.modules.get("arches_render.render.jobs")
+    if jobs is not None:
+        jobs.clear_cache()
+    if "mitsuba" in sys.modules:
+        gc.collect()
+    yield
 
 
 @pytest.fixture(scope="session")
