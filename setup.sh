@@ -7,7 +7,8 @@
 #                                  cores, at most 4), a test file per process at a time
 #
 # Installs what is missing and nothing else: the Debian packages libllvm19 (Dr.Jit's LLVM
-# backend needs libLLVM >= 16), python3, python3-venv and python3-pip; a virtualenv in .venv;
+# backend needs libLLVM >= 16), python3, python3-venv and python3-pip (and, for the tests,
+# chromium: the preview page's browser test); a virtualenv in .venv;
 # the project in editable mode. Safe to run again. Environment: PYTHON (interpreter that
 # creates .venv, default python3).
 set -euo pipefail
@@ -76,6 +77,10 @@ install_system_packages() {
     if ! find_libllvm >/dev/null; then
         missing+=(libllvm19)
     fi
+    # The tests drive the preview page in a real headless browser (Debian's Chromium).
+    if [[ $mode == test ]] && ! command -v chromium >/dev/null; then
+        missing+=(chromium)
+    fi
     if command -v apt-get >/dev/null && command -v dpkg-query >/dev/null; then
         for pkg in python3 python3-venv python3-pip; do
             deb_installed "$pkg" || missing+=("$pkg")
@@ -92,7 +97,11 @@ install_system_packages() {
             die "no libLLVM >= $MIN_LLVM found and apt-get is not available: install LLVM $MIN_LLVM or newer" \
                 "(e.g. libllvm19) with your package manager, or set DRJIT_LIBLLVM_PATH to its libLLVM.so"
         fi
-        die "python3 (>= 3.10, with venv) is missing and apt-get is not available: install it, then re-run"
+        if [[ " ${missing[*]} " == *" python3 "* ]]; then
+            die "python3 (>= 3.10, with venv) is missing and apt-get is not available: install it, then re-run"
+        fi
+        die "${missing[*]} is missing and apt-get is not available: install it (the preview's browser test" \
+            "runs /usr/bin/chromium), then re-run"
     fi
     if (( EUID != 0 )); then
         command -v sudo >/dev/null || die "installing ${missing[*]} needs root: re-run as root or install sudo"

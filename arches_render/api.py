@@ -133,6 +133,10 @@ class Lookdev:
         Times the Mitsuba scene was built (1 after :func:`load`).
     last : numpy.ndarray or None
         The last :meth:`render` (what a notebook shows of the look).
+    last_layers : dict
+        Its AOV layers (``{layer: (array, channel letters)}``; empty without ``aovs``).
+    camera_name : str or None
+        The camera rendered through (:meth:`use_camera`; ``None``: the scene's default).
     """
 
     def __init__(self, path, resolution=None, spp=None, seed=None):
@@ -143,9 +147,11 @@ class Lookdev:
         self.desc = parse_scene(copy.deepcopy(self.data), self.path)
         self.width, self.height = resolution or (self.desc.render.width, self.desc.render.height)
         self.spp, self.seed = spp, seed
+        self.camera_name = None
         self.compiled = 0
         self.rebuilds = 0
         self.last = None
+        self.last_layers = {}
         self._build()
 
     # ------------------------------------------------------------------ building
@@ -188,11 +194,43 @@ class Lookdev:
 
     def update(self, overrides: dict) -> "Lookdev":
         """Apply several overrides at once (see :meth:`set`)."""
-        data = copy.deepcopy(self.data)
+        return self._replace(self.data, overrides)
+
+    def reload(self, overrides: dict | None = None) -> "Lookdev":
+        """Read the scene file again (an edit saved by the user) and apply it to the live
+        scene, then ``overrides`` (dotted keys, as :meth:`update`) on top: the parameter
+        edits of :meth:`set` where the change allows them.
+
+        Raises
+        ------
+        arches_render.scene.SceneError
+            When the file no longer reads or validates (nothing is changed then).
+        """
+        return self._replace(read_toml(self.path), overrides or {})
+
+    def use_camera(self, name: str | None) -> "Lookdev":
+        """Render through the scene's camera ``name`` (``"camera"`` for ``[camera]``, else a
+        ``[cameras.NAME]``); ``None``: the scene's default. A parameter edit.
+
+        Raises
+        ------
+        arches_render.scene.SceneError
+            For a name the scene does not have (the message lists its cameras).
+        """
+        desc = self._parse(copy.deepcopy(self.data), self.path)
+        desc.select_camera(name)
+        old, self.desc, self.camera_name = self.desc, desc, name
+        self._apply(old, desc)
+        return self
+
+    def _replace(self, data: dict, overrides: dict) -> "Lookdev":
+        data = copy.deepcopy(data)
         for key, value in overrides.items():
             node, last = self._locate(data, key, create=True)
             node[last] = copy.deepcopy(value)
         desc = self._parse(copy.deepcopy(data), self.path)  # validates: raises before any change
+        if self.camera_name in desc.cameras:
+            desc.select_camera(self.camera_name)
         old, self.data = self.desc, data
         self.desc = desc
         self._apply(old, desc)
@@ -279,7 +317,7 @@ class Lookdev:
         return True
 
     # ------------------------------------------------------------------ rendering
-    def render(self, path=None, spp=None, seed=None, view="srgb", aovs=False, on_pass=None):
+    def render(self, path=None, spp=None, seed=None, view="srgb", aovs=False, on_pass=None, passes=None):
         """Render the current state.
 
         Parameters
@@ -296,6 +334,9 @@ class Lookdev:
         on_pass : callable, optional
             ``on_pass(samples_done, beauty)`` after each sample pass, the mean beauty so
             far (:func:`~arches_render.render.renderer.render_layers`).
+        passes : int, optional
+            Sample passes (default: the scene's ``[render] passes``): more passes, a
+            finer progression of ``on_pass``.
 
         Returns
         -------
@@ -309,14 +350,14 @@ class Lookdev:
         scene = self._aov_scene() if aovs else self.scene
         with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
             dr.kernel_history_clear()
-            rgb, layers = render_layers(scene, spp, seed, s.passes, on_pass=on_pass)
+            rgb, layers = render_layers(scene, spp, seed, s.passes if passes is None else passes, on_pass=on_pass)
             hist = dr.kernel_history()
         # A kernel this process has not launched before misses the in-memory
         # cache (whether it was then compiled or loaded from the disk cache).
         self.compiled = sum(1 for k in hist if k["type"] == dr.KernelType.JIT and not k.get("cache_hit", False))
         if path is not None:
             self._write(Path(path), rgb, layers, spp, seed, view)
-        self.last = rgb
+        self.last, self.last_layers = rgb, layers
         return rgb
 
     # ------------------------------------------------------------------ notebooks

@@ -19,7 +19,7 @@ import sys
 from . import __version__, extensions
 from .backend import BackendError, set_variant
 from .atomic import OutputError
-from .commands import UsageError, info, mesh, render, turntable
+from .commands import UsageError, info, mesh, preview, render, turntable
 from .render.isolated import RenderCrash
 from .resources import ResourceError
 from .scene import SceneError, paths
@@ -27,7 +27,7 @@ from .scene import SceneError, paths
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
 
 #: The core subcommands, in the order of ``arches-render --help``.
-CORE_COMMANDS = (render, turntable, mesh, info)
+CORE_COMMANDS = (render, turntable, mesh, preview, info)
 
 
 def build_parser() -> argparse.ArgumentParser:

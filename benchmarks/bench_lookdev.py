@@ -19,6 +19,11 @@
                         is shaded once per vertex by ``implicit_path`` (issue 33 part 2).
                         Baseline: the goal of ``lookdev_cost_ratio``, 1.3. Extra fields:
                         both times, both integrators, the load.
+``preview_first_image_s``  seconds from a saved edit of ``scenes/default.toml`` (its sun) to
+                        the first image of ``arches-render preview`` (160x90, warm
+                        kernels, the file watcher included). Baseline: the goal, 1 s.
+                        Extra fields: the seconds to the full 640x360, 16 spp, the
+                        kernels the edits compiled, the load.
 ``lookdev_parts_default``  what each part of ``scenes/default.toml``'s look costs
                         (issue 33 part 1): the scene rendered (320x180, 16 spp, warm
                         kernels, field and mesh) with its look, with one part off at a
@@ -34,6 +39,7 @@ from __future__ import annotations
 
 import copy
 import os
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -176,7 +182,47 @@ def bench_lookdev_parts_default(repeat):
                 load=round(0.5 * (load0 + os.getloadavg()[0]), 2))
 
 
+def bench_preview_first_image_s(repeat):
+    """Seconds from a saved edit of the default scene (its sun's elevation) to the
+    preview's first image (160x90), on warm kernels: the file watcher, the reload, the
+    parameter edit and the small render (issue 35 part 1; goal 1 s). Extra: the seconds
+    to the full resolution (the scene's 640x360 and 16 spp, denoised), the kernels the
+    edits compiled, the load."""
+    import shutil
+    import threading
+
+    from arches_render.preview.server import watch_scene
+    from arches_render.preview.session import PreviewSession
+    load0 = os.getloadavg()[0]
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        shutil.copytree(REPO / "scenes" / "data", folder / "data")
+        path = folder / "default.toml"
+        text = (REPO / "scenes" / "default.toml").read_text()
+        path.write_text(text)
+        session = PreviewSession(path).start()
+        stop = threading.Event()
+        watch_scene(session, stop)
+        last = session.wait_for(lambda s: s.stage == "done", 600)  # compiles (or loads) the kernels
+        firsts, fulls, compiled = [], [], 0
+        for k in range(max(3, repeat)):
+            t0 = time.perf_counter()
+            path.write_text(text.replace("elevation = 33.0", f"elevation = {30.0 - 3.0 * k:.1f}"))
+            first = session.wait_for(lambda s, n=last.picture: s.picture > n and s.stage == "first", 120)
+            firsts.append(time.perf_counter() - t0)
+            last = session.wait_for(lambda s, n=first.picture: s.picture > n and s.stage == "done", 600)
+            fulls.append(time.perf_counter() - t0)
+            compiled += first.compiled + last.compiled
+        stop.set()
+        session.stop()
+    return dict(value=statistics.median(firsts), unit="s", baseline=1.0, baseline_is="goal",
+                first_size=list(first.size), full_s=statistics.median(fulls), full_size=list(last.size),
+                edits=len(firsts), firsts_s=[round(x, 3) for x in firsts], compiled_by_edits=compiled,
+                load=round(0.5 * (load0 + os.getloadavg()[0]), 2))
+
+
 BENCHMARKS = {
+    "preview_first_image_s": (bench_preview_first_image_s, 3),
     "lookdev_gallery_s": (bench_lookdev_gallery_s, 1),
     "lookdev_cost_ratio": (bench_lookdev_cost_ratio, 3),
     "lookdev_default_mesh_ratio": (bench_lookdev_default_mesh_ratio, 3),

@@ -31,7 +31,7 @@ from ..scene import load_scene, paths
 from .renderer import (build_scene, load_materials, render_layers, scene_integrator, set_pixel_spread,
                        tile_projection)
 
-__all__ = ["RenderJob", "run_job", "clear_cache", "scene_inputs", "sensor_clip", "job_clip"]
+__all__ = ["RenderJob", "run_job", "clear_cache", "scene_inputs", "scene_files", "sensor_clip", "job_clip"]
 
 _CACHE: "OrderedDict[tuple, tuple]" = OrderedDict()
 _CACHE_SIZE = 4
@@ -212,10 +212,33 @@ def scene_inputs(path) -> str:
         doc = tomlfile.loads(data.decode("utf-8"))
     except (ValueError, UnicodeDecodeError):
         doc = {}  # load_scene reports the error; the text digest alone keys it
-    for f in sorted(set(_named_files(doc, path.parent))):
+    for f in scene_files(path, doc):
         st = f.stat()
         h.update(f"\0{f}\0{st.st_size}\0{st.st_ino}\0{st.st_mtime_ns}\0{st.st_ctime_ns}".encode())
     return h.hexdigest()
+
+
+def scene_files(path, doc=None) -> list[Path]:
+    """The existing files a scene file names, resolved and sorted (see :func:`scene_inputs`).
+
+    Parameters
+    ----------
+    path : str or Path
+        The scene file.
+    doc : dict, optional
+        Its parsed TOML (read from ``path`` when not given; an unreadable file names none).
+
+    Returns
+    -------
+    list of Path
+    """
+    path = Path(path)
+    if doc is None:
+        try:
+            doc = tomlfile.load(path)
+        except (OSError, ValueError):
+            doc = {}
+    return sorted(set(_named_files(doc, path.parent)))
 
 
 def _named_files(value, base: Path):
