@@ -89,6 +89,14 @@ def test_session_refines_reloads_moves_and_keeps_the_last_picture_on_a_bad_edit(
         assert session.picture()[1] != before
         # The moved camera survived the reload (an override on the file's tables).
         assert session._full.desc.camera.origin != tomlfile.loads(path.read_text())["camera"]["origin"]
+        # A material value saved in the file: a new picture, no kernel compiled.
+        assert '"grass.height_min" = 13.1' in path.read_text()
+        path.write_text(path.read_text().replace('"grass.height_min" = 13.1', '"grass.height_min" = 30.0'))
+        session.post("reload")
+        first = _next(session, lower.picture, "first", 60)
+        assert first.compiled == 0
+        lower = _next(session, first.picture, "done")
+        assert lower.compiled == 0 and lower.error is None
 
         # A bad edit: its one line is shown, the picture stays.
         version, png = session.picture()
