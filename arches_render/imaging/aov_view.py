@@ -12,8 +12,8 @@ layer              picture
 ``depth``          near bright, far dark: ``1 - (d - d_1) / (d_99 - d_1)`` between the
                    1st and 99th percentiles of the hits; misses black
 ``position``       each axis scaled to the hits' range
-``layers``         each material layer's weight times a colour of its own
-                   (:data:`LAYER_COLOURS`), summed: where the rock, grass and snow lie
+``layers``         each material layer's weight times its colour (rock grey, sand tan,
+                   grass green, snow white, ...: :data:`LAYER_COLOURS`), summed
 ``coverage``       field green, mesh blue
 ``steps`` and ray  a black-red-yellow-white heat map up to the 99th percentile
 counts
@@ -31,16 +31,20 @@ import numpy as np
 from .colour import view_to_uint8
 from .report import heatmap
 
-__all__ = ["BEAUTY", "DENOISED", "LAYER_COLOURS", "layer_to_uint8"]
+__all__ = ["BEAUTY", "DENOISED", "LAYER_COLOURS", "OTHER_COLOURS", "layer_to_uint8"]
 
 #: The name of the beauty among the layers a preview offers.
 BEAUTY = "beauty"
 #: The denoised beauty (``arches-render render --denoise``'s layer): shown as the beauty is.
 DENOISED = "denoised"
 
-#: Colours of a material's layers in the ``layers`` picture, in layer order (then repeated).
-LAYER_COLOURS = np.array([[0.55, 0.55, 0.55], [0.25, 0.65, 0.2], [0.95, 0.95, 1.0], [0.85, 0.6, 0.3],
-                          [0.3, 0.45, 0.9], [0.8, 0.25, 0.25], [0.6, 0.35, 0.75], [0.2, 0.75, 0.75]])
+#: Colours of the usual material layers in the ``layers`` picture, by name.
+LAYER_COLOURS = {"rock": (0.5, 0.5, 0.5), "sand": (0.9, 0.75, 0.45), "grass": (0.25, 0.65, 0.2),
+                 "snow": (0.97, 0.97, 1.0), "scree": (0.65, 0.55, 0.5), "soil": (0.5, 0.32, 0.2),
+                 "moss": (0.45, 0.55, 0.15), "ice": (0.6, 0.85, 1.0)}
+#: Colours of other layers, in their order (then repeated).
+OTHER_COLOURS = np.array([[0.85, 0.25, 0.25], [0.3, 0.45, 0.9], [0.6, 0.35, 0.75], [0.2, 0.75, 0.75],
+                          [0.9, 0.5, 0.1], [0.8, 0.8, 0.2]])
 
 _COLOUR_LAYERS = ("albedo", "beauty_clear", "transmittance")
 
@@ -56,7 +60,8 @@ def _robust_range(values: np.ndarray) -> tuple[float, float]:
     return float(lo), float(max(hi, lo + 1e-6))
 
 
-def layer_to_uint8(name: str, array: np.ndarray, view: str = "srgb", exposure: float = 0.0) -> np.ndarray:
+def layer_to_uint8(name: str, array: np.ndarray, view: str = "srgb", exposure: float = 0.0,
+                   channels=()) -> np.ndarray:
     """The 8-bit picture of one render layer (module docstring).
 
     Parameters
@@ -69,6 +74,9 @@ def layer_to_uint8(name: str, array: np.ndarray, view: str = "srgb", exposure: f
     view, exposure
         View transform and exposure (stops) of the beauty
         (:func:`arches_render.imaging.colour.view_to_uint8`); other layers ignore them.
+    channels : sequence of str
+        The layer's channel names (for ``layers``: the material layers' names, which
+        choose their colours, :data:`LAYER_COLOURS`).
 
     Returns
     -------
@@ -98,7 +106,9 @@ def layer_to_uint8(name: str, array: np.ndarray, view: str = "srgb", exposure: f
             out[..., k] = np.where(hit, (a[..., k] - lo) / (hi - lo), 0.0)
         return _unit(out)
     if name == "layers":
-        colours = LAYER_COLOURS[np.arange(a.shape[2]) % len(LAYER_COLOURS)]
+        names = list(channels) + [""] * (a.shape[2] - len(channels))
+        others = iter(OTHER_COLOURS[np.arange(a.shape[2]) % len(OTHER_COLOURS)])
+        colours = np.array([LAYER_COLOURS[n] if n in LAYER_COLOURS else next(others) for n in names[:a.shape[2]]])
         return _unit(np.einsum("hwc,ck->hwk", a, colours))
     if name == "coverage":
         out = np.zeros(a.shape[:2] + (3,), np.float32)

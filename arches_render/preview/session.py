@@ -193,6 +193,7 @@ class PreviewSession:
                                    view=desc.render.view)
         self._png = b""
         self._picture = None          # (layers dict with the beauty, scene exposure) of the last render
+        self._channels: dict = {}     # the layers' channel names
         self._override: dict = {}     # the moved camera, on top of the file
         # A scene that denoises its renders shows the denoised picture when the passes
         # are done (the ``denoised`` layer, as ``render`` writes it), which needs the AOVs.
@@ -393,6 +394,7 @@ class PreviewSession:
     def _publish(self, look, stage, done, spp, changed_at):
         layers = {BEAUTY: look.last}
         layers.update({name: arr for name, (arr, _) in look.last_layers.items()})
+        self._channels = {name: letters for name, (_, letters) in look.last_layers.items()}
         if stage == "done" and look.desc.render.denoise and "albedo" in layers and "normal" in layers:
             layers[DENOISED] = denoise(look.last, layers["albedo"], layers["normal"])
         self._publish_arrays(layers, look, stage, done, spp, changed_at, compiled=look.compiled)
@@ -413,7 +415,7 @@ class PreviewSession:
             layers, exposure = self._picture
             s = self._state
             name = s.layer if s.layer in layers else BEAUTY
-            pixels = layer_to_uint8(name, layers[name], s.view, exposure + s.exposure)
+            pixels = layer_to_uint8(name, layers[name], s.view, exposure + s.exposure, self._channels.get(name, ()))
         png = png_bytes(pixels)
         with self._lock:
             self._png = png
