@@ -8,7 +8,8 @@
 #
 # Installs what is missing and nothing else: the Debian packages libllvm19 (Dr.Jit's LLVM
 # backend needs libLLVM >= 16), python3, python3-venv and python3-pip (and, for the tests,
-# chromium: the preview page's browser test); a virtualenv in .venv;
+# chromium, the preview page's browser, and nodejs and npm, which install Khronos's glTF
+# validator into .venv/node); a virtualenv in .venv;
 # the project in editable mode. Safe to run again. Environment: PYTHON (interpreter that
 # creates .venv, default python3).
 set -euo pipefail
@@ -81,6 +82,10 @@ install_system_packages() {
     if [[ $mode == test ]] && ! command -v chromium >/dev/null; then
         missing+=(chromium)
     fi
+    # ... and check exported glTF with Khronos's validator, which runs on Node.js.
+    if [[ $mode == test ]] && ! command -v npm >/dev/null; then
+        missing+=(nodejs npm)
+    fi
     if command -v apt-get >/dev/null && command -v dpkg-query >/dev/null; then
         for pkg in python3 python3-venv python3-pip; do
             deb_installed "$pkg" || missing+=("$pkg")
@@ -149,6 +154,18 @@ install_project() {
     printf '%s\n%s\n' "$key" "$extra" >"$STAMP"
 }
 
+# Khronos's glTF validator (npm package gltf-validator) into .venv/node, for the export tests.
+install_gltf_validator() {
+    local dir=$VENV/node version=2.0.0-dev.3.10
+    if [[ -f $dir/node_modules/gltf-validator/package.json ]] \
+        && grep -q "\"version\": \"$version\"" "$dir/node_modules/gltf-validator/package.json"; then
+        say "gltf-validator $version: present"
+        return 0
+    fi
+    say "npm install gltf-validator@$version (Khronos's glTF validator, for the export tests)"
+    quietly npm install --prefix "$dir" --no-audit --no-fund --silent "gltf-validator@$version"
+}
+
 [[ $# -ge 1 ]] || usage
 mode=$1
 shift
@@ -162,6 +179,7 @@ esac
 install_system_packages
 setup_venv
 install_project "$extra"
+if [[ $mode == test ]]; then install_gltf_validator; fi
 
 if [[ $mode == demo ]]; then
     say "arches-render render scenes/default.toml -o out/default.exr${*:+ $*}"

@@ -97,7 +97,8 @@ def _material(stage, path, colour, texture=None):
     else:
         reader = UsdShade.Shader.Define(stage, f"{path}/stReader")
         reader.CreateIdAttr("UsdPrimvarReader_float2")
-        reader.CreateInput("varname", Sdf.ValueTypeNames.Token).Set("st")
+        # A string since UsdPreviewSurface 2.5 (a token fails OpenUSD's validators).
+        reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("st")
         tex = UsdShade.Shader.Define(stage, f"{path}/Albedo")
         tex.CreateIdAttr("UsdUVTexture")
         tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(str(texture))
