@@ -43,14 +43,15 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import tomlfile
 from ..atomic import atomic_write
 from ..imaging.aov_view import BEAUTY, DENOISED, layer_to_uint8
 from ..imaging.colour import VIEWS
+from ..imaging.exposure import exposure_of
 from ..imaging.preview import png_bytes
 from ..render.denoise import denoise
 from ..render.jobs import scene_inputs
 from ..scene import SceneError, parse_scene, read_toml
-from .. import tomlfile
 
 __all__ = ["FIRST_WIDTH", "FIRST_SPP", "PreviewSession", "PreviewState", "orbit", "dolly"]
 
@@ -301,9 +302,8 @@ class PreviewSession:
         render = False
         repaint = any(k in todo for k in ("layer", "exposure", "view"))
         with self._lock:
-            for key in ("exposure",):
-                if key in todo:
-                    self._state.exposure = float(todo[key])
+            if "exposure" in todo:
+                self._state.exposure = float(todo["exposure"])
             if todo.get("view") in VIEWS:
                 self._state.view = todo["view"]
             if "layer" in todo:
@@ -400,7 +400,6 @@ class PreviewSession:
         self._publish_arrays(layers, look, stage, done, spp, changed_at, compiled=look.compiled)
 
     def _publish_arrays(self, layers, look, stage, done, spp, changed_at, compiled=None):
-        from ..imaging.exposure import exposure_of
         exposure = exposure_of(look.desc.render, layers[BEAUTY])[0]
         with self._lock:
             keep = self._picture[0] if self._picture is not None and stage == "refining" else {}
