@@ -1,0 +1,209 @@
+"""Marching cubes by column tiles and z runs, stitched into one mesh (issue 37 item 2).
+
+The grid's columns are cut into tiles of ``TILE x TILE`` cubes; a tile holds the
+vertex columns ``[i0, i0 + TILE]`` (one column shared with each neighbour, so every
+cube belongs to exactly one tile). Each tile is meshed as one or more *runs*:
+sub-volumes ``[k0, k1]`` of its levels, in increasing ``k``. scikit-image's
+marching cubes runs on each run, the run's array transposed to ``(k, j, i)`` so
+that its traversal is ``k`` outermost.
+
+**Why the mesh does not depend on the runs.** A cube whose corners share one sign
+emits nothing, so meshing a run that holds every crossing cube of the tile emits the
+same triangles as meshing the whole column of the tile; with ``k`` outermost, the
+cubes are visited in ``(k, j, i)`` order, and runs taken in increasing ``k`` visit
+the crossing cubes in the same order. Triangles and the order in which vertices
+are first referenced are therefore those of the whole tile. Two runs of one tile
+separated by a layer of non-crossing cubes share no vertex: a vertex sits on an
+edge whose end values differ in sign, and every cube holding that edge crosses.
+
+**Stitching.** Vertices are keyed by the grid edge they lie on (its lower end point
+and axis), from their coordinates in grid units: two coordinates are integers.
+A coordinate within ``DELTA`` of an integer counts as one (the run's local
+``float32`` coordinates round a fraction ``t`` differently with the run's origin; a
+vertex with ``t < DELTA`` is keyed as the grid point itself, as scikit-image merges
+coincident vertices). Vertices of a tile's side faces and at grid points are merged
+by key, keeping the first in tile order; faces that then repeat a vertex are
+dropped. Interior vertices of Lewiner's subcases (one per cube) are never shared.
+
+The banded mesh (runs over the crossing layers only) and the dense reference
+(one run per tile over the whole column) go through this same function, so equal
+grid values give equal faces, in the same order, and vertices equal up to the
+``float32`` rounding of the run origin (``< 2^-17`` voxel for runs under 64 levels).
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+from skimage.measure import marching_cubes
+
+from arches_render.mesh.polygonize import TriangleMesh, oriented_mesh
+
+__all__ = ["TILE", "DELTA", "mesh_runs"]
+
+#: Cubes per tile side.
+TILE = 32
+#: Coordinates within this many voxels of an integer are on the grid line (see module doc).
+DELTA = 2.0 ** -12
+
+
+@numba.njit(cache=True)
+def _edge_t(vt, loc, axis):
+    """``t = v0 / (v0 - v1)`` on the run's edge from ``loc`` along ``axis`` (double, as
+    scikit-image), or -1 when the edge does not cross (its ends on one side of 0)."""
+    if loc[axis] < 0 or loc[axis] + 1 >= vt.shape[axis]:
+        return -1.0
+    v0 = np.float64(vt[loc[0], loc[1], loc[2]])
+    loc[axis] += 1
+    v1 = np.float64(vt[loc[0], loc[1], loc[2]])
+    loc[axis] -= 1
+    if (v0 > 0) == (v1 > 0):
+        return -1.0
+    return v0 / (v0 - v1)
+
+
+@numba.njit(cache=True)
+def _run_keys(v, vt, origin, box, ny, nz, delta):
+    """Grid positions (float32, grid units), edge keys and shareability of one run's
+    vertices ``v`` (scikit-image's output on ``vt``, the run transposed to ``(k, j, i)``).
+
+    Key ``((i ny + j) nz + k) 4 + a`` for a vertex on the edge from grid point
+    ``(i, j, k)`` along axis ``a``; ``a = 3`` for a vertex at the grid point itself
+    (``t < delta / 2`` or ``1 - t < delta / 2``); -1 for a cube's interior vertex
+    (never shared). The key and the position, ``float32(k + t)`` with
+    ``t = v0 / (v0 - v1)`` in double as scikit-image computes it (checked bit for bit
+    in the tests) but from the *global* index, are functions of the edge's values
+    alone, not of the run's origin (whose local ``float32`` coordinates round ``t``
+    differently): two runs that hold one edge give it one key.
+
+    Which edge: a vertex with two local coordinates within ``delta`` of integers and
+    one farther is on that axis' edge (then ``t >= delta - ulp > delta / 2``). One
+    with three is near grid point ``p``: of the (at most six) crossing edges at
+    ``p``, it is the one whose local ``float32`` position is the vertex's.
+    """
+    n = v.shape[0]
+    g = np.empty((n, 3), dtype=np.float32)  # exact: grid integers and float32(k + t)
+    keys = np.full(n, -1, dtype=np.int64)
+    share = np.zeros(n, dtype=np.bool_)
+    i0, i1, j0, j1 = box[0], box[1], box[2], box[3]
+    loc = np.empty(3, dtype=np.int64)
+    for q in range(n):
+        frac_axis = -1
+        nint = 0
+        for a in range(3):
+            x = np.float64(v[q, a])
+            rx = np.floor(x + 0.5)
+            if abs(x - rx) < delta:
+                loc[a] = np.int64(rx)
+                nint += 1
+            else:
+                loc[a] = np.int64(np.floor(x))
+                frac_axis = a
+        if nint < 2:
+            for a in range(3):
+                g[q, a] = np.float32(np.float64(v[q, 2 - a]) + origin[a])
+            continue
+        t = -1.0
+        if nint == 2:
+            t = _edge_t(vt, loc, frac_axis)
+        else:
+            # Near a grid point p: find the crossing edge at p that gave this vertex
+            # (loc ends at the edge's lower end).
+            for a in range(3):
+                for back in range(2):
+                    loc[a] -= back
+                    tt = _edge_t(vt, loc, a)
+                    if tt >= 0.0 and np.float32(np.float64(loc[a]) + tt) == v[q, a]:
+                        frac_axis, t = a, tt
+                        break
+                    loc[a] += back
+                if t >= 0.0:
+                    break
+        # Resolve to a grid point when t is within delta / 2 of an end.
+        axis = 3
+        if t >= 0.0 and 0.5 * delta <= t <= 1.0 - 0.5 * delta:
+            axis = 2 - frac_axis
+        elif t > 0.5:  # at the edge's upper end
+            loc[frac_axis] += 1
+        # (k, j, i) local -> (i, j, k) global
+        i, j, k = loc[2] + origin[0], loc[1] + origin[1], loc[0] + origin[2]
+        g[q, 0], g[q, 1], g[q, 2] = i, j, k
+        if axis < 3:
+            g[q, axis] = np.float32(np.float64(g[q, axis]) + t)
+        keys[q] = ((i * ny + j) * nz + k) * 4 + axis
+        share[q] = axis == 3 or (axis != 0 and (i == i0 or i == i1)) or (axis != 1 and (j == j0 or j == j1))
+    return g, keys, share
+
+
+@numba.njit(cache=True)
+def _stitch(g, faces, keys, order):
+    """Merge the vertices ``order`` (shareable, sorted by key, stably) of equal key into
+    the first one in tile order, renumber the kept vertices in order, and drop the
+    faces that then repeat a vertex."""
+    n = len(g)
+    rep = np.arange(n)
+    for s in range(1, len(order)):
+        if keys[order[s]] == keys[order[s - 1]]:
+            rep[order[s]] = rep[order[s - 1]]
+    new = np.empty(n, dtype=np.int64)
+    kept = 0
+    for q in range(n):
+        if rep[q] == q:
+            new[q] = kept
+            kept += 1
+    out_g = np.empty((kept, 3), dtype=g.dtype)
+    for q in range(n):
+        if rep[q] == q:
+            out_g[new[q]] = g[q]
+    out_f = np.empty(faces.shape, dtype=np.uint32)
+    m = 0
+    for r in range(len(faces)):
+        a, b, c = new[rep[faces[r, 0]]], new[rep[faces[r, 1]]], new[rep[faces[r, 2]]]
+        if a != b and b != c and a != c:
+            out_f[m, 0], out_f[m, 1], out_f[m, 2] = a, b, c
+            m += 1
+    return out_g, out_f[:m]
+
+
+def mesh_runs(node, runs, shape, lo, voxel, normals=True) -> TriangleMesh:
+    """Stitched marching-cubes mesh of ``runs`` (see module docstring).
+
+    Parameters
+    ----------
+    node : Node
+        The field (for normals).
+    runs : iterable of (numpy.ndarray, tuple, tuple)
+        ``(values (sx, sy, sz), (i0, j0, k0) origin, (i0, i1, j0, j1) tile)`` in tile
+        order, then increasing ``k0``.
+    shape, lo, voxel
+        The grid.
+    normals : bool
+        Field normals and one orientation (``oriented_mesh``); else none and
+        scikit-image's winding.
+    """
+    verts, faces, keys, shares, nv = [], [], [], [], 0
+    ny, nz = int(shape[1]), int(shape[2])
+    for vol, origin, box in runs:
+        # (A run holds a crossing cube, so 0 lies within its values.)
+        vt = np.ascontiguousarray(vol.transpose(2, 1, 0))
+        try:
+            v, f, _, _ = marching_cubes(vt, 0.0, allow_degenerate=True)
+        except RuntimeError:  # "No surface found": the crossing was a 0 corner only
+            continue
+        g, key, share = _run_keys(v, vt, np.asarray(origin, np.int64), np.asarray(box, np.int64), ny, nz, DELTA)
+        verts.append(g)
+        keys.append(key)
+        shares.append(share)
+        # The axis swap mirrors the mesh: reverse each face's winding back.
+        faces.append(f[:, ::-1] + np.int32(nv))
+        nv += len(v)
+    if not verts:
+        raise ValueError("the field has no surface inside its bounds at this voxel size")
+    g, f, keys = np.concatenate(verts), np.concatenate(faces), np.concatenate(keys)
+    cand = np.flatnonzero(np.concatenate(shares))
+    g, f = _stitch(g, f, keys, cand[np.argsort(keys[cand], kind="stable")])  # stable: first in tile order leads
+    # float32 -> float64 first, as scikit-image's ``vertices * spacing``.
+    v = (g.astype(np.float64) * voxel + lo).astype(np.float32)
+    if not normals:
+        return TriangleMesh(v, f, np.zeros((0, 3), dtype=np.float32))
+    return oriented_mesh(node, v, f, voxel)
