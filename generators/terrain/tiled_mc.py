@@ -2,33 +2,32 @@
 
 The grid's columns are cut into tiles of ``TILE x TILE`` cubes; a tile holds the
 vertex columns ``[i0, i0 + TILE]`` (one column shared with each neighbour, so every
-cube belongs to exactly one tile). Each tile is meshed as one or more *runs*:
-sub-volumes ``[k0, k1]`` of its levels, in increasing ``k``. scikit-image's
-marching cubes runs on each run, the run's array transposed to ``(k, j, i)`` so
-that its traversal is ``k`` outermost.
+cube belongs to exactly one tile). Each tile is meshed by *runs*: its maximal runs
+of consecutive cube layers ``c0 .. c1`` that hold a crossing cube (corners on both
+sides of 0), i.e. the sub-volume of levels ``c0 .. c1 + 1``. scikit-image's marching
+cubes (Lewiner) runs on each run.
 
-**Why the mesh does not depend on the runs.** A cube whose corners share one sign
-emits nothing, so meshing a run that holds every crossing cube of the tile emits the
-same triangles as meshing the whole column of the tile; with ``k`` outermost, the
-cubes are visited in ``(k, j, i)`` order, and runs taken in increasing ``k`` visit
-the crossing cubes in the same order. Triangles and the order in which vertices
-are first referenced are therefore those of the whole tile. Two runs of one tile
-separated by a layer of non-crossing cubes share no vertex: a vertex sits on an
-edge whose end values differ in sign, and every cube holding that edge crosses.
+**Why the triangles are those of the whole grid.** A cube's triangles depend on its
+8 corner values only, and a cube whose corners share one sign emits none; every
+crossing cube lies in exactly one run. Two runs share no vertex: a vertex sits on
+an edge whose end values differ in sign, every cube holding that edge crosses, and
+two runs of a tile are separated by a layer of non-crossing cubes (runs of
+different tiles meet only on the tiles' side faces, below).
 
 **Stitching.** Vertices are keyed by the grid edge they lie on (its lower end point
-and axis), from their coordinates in grid units: two coordinates are integers.
-A coordinate within ``DELTA`` of an integer counts as one (the run's local
-``float32`` coordinates round a fraction ``t`` differently with the run's origin; a
-vertex with ``t < DELTA`` is keyed as the grid point itself, as scikit-image merges
-coincident vertices). Vertices of a tile's side faces and at grid points are merged
-by key, keeping the first in tile order; faces that then repeat a vertex are
-dropped. Interior vertices of Lewiner's subcases (one per cube) are never shared.
+and axis, :func:`_run_keys`), and their positions are recomputed from the edge's
+values with the global index, as scikit-image computes them: both are then
+independent of the run's origin (whose local ``float32`` coordinates round
+differently). Vertices on a tile's side faces and at grid points are merged by key,
+keeping the first in tile order; faces that then repeat a vertex are dropped (as
+scikit-image drops degenerate faces). Interior vertices of Lewiner's subcases (one
+per cube) are never shared.
 
-The banded mesh (runs over the crossing layers only) and the dense reference
-(one run per tile over the whole column) go through this same function, so equal
-grid values give equal faces, in the same order, and vertices equal up to the
-``float32`` rounding of the run origin (``< 2^-17`` voxel for runs under 64 levels).
+**Same mesh, banded or dense.** The runs are found from the signs alone, so the
+banded mesh (crossing layers searched within the band's windows) and the dense
+reference (searched over every cube of the grid) have the same runs as soon as
+their values have the same signs, and go through this same function: equal faces
+bit for bit, in the same order (tile order, then scikit-image's within each run).
 """
 
 from __future__ import annotations
@@ -65,7 +64,7 @@ def _edge_t(vt, loc, axis):
 @numba.njit(cache=True)
 def _run_keys(v, vt, origin, box, ny, nz, delta):
     """Grid positions (float32, grid units), edge keys and shareability of one run's
-    vertices ``v`` (scikit-image's output on ``vt``, the run transposed to ``(k, j, i)``).
+    vertices ``v`` (scikit-image's output on ``vt``, the run's values).
 
     Key ``((i ny + j) nz + k) 4 + a`` for a vertex on the edge from grid point
     ``(i, j, k)`` along axis ``a``; ``a = 3`` for a vertex at the grid point itself
@@ -101,7 +100,7 @@ def _run_keys(v, vt, origin, box, ny, nz, delta):
                 frac_axis = a
         if nint < 2:
             for a in range(3):
-                g[q, a] = np.float32(np.float64(v[q, 2 - a]) + origin[a])
+                g[q, a] = np.float32(np.float64(v[q, a]) + origin[a])
             continue
         t = -1.0
         if nint == 2:
@@ -122,11 +121,10 @@ def _run_keys(v, vt, origin, box, ny, nz, delta):
         # Resolve to a grid point when t is within delta / 2 of an end.
         axis = 3
         if t >= 0.0 and 0.5 * delta <= t <= 1.0 - 0.5 * delta:
-            axis = 2 - frac_axis
+            axis = frac_axis
         elif t > 0.5:  # at the edge's upper end
             loc[frac_axis] += 1
-        # (k, j, i) local -> (i, j, k) global
-        i, j, k = loc[2] + origin[0], loc[1] + origin[1], loc[0] + origin[2]
+        i, j, k = loc[0] + origin[0], loc[1] + origin[1], loc[2] + origin[2]
         g[q, 0], g[q, 1], g[q, 2] = i, j, k
         if axis < 3:
             g[q, axis] = np.float32(np.float64(g[q, axis]) + t)
@@ -185,7 +183,7 @@ def mesh_runs(node, runs, shape, lo, voxel, normals=True) -> TriangleMesh:
     ny, nz = int(shape[1]), int(shape[2])
     for vol, origin, box in runs:
         # (A run holds a crossing cube, so 0 lies within its values.)
-        vt = np.ascontiguousarray(vol.transpose(2, 1, 0))
+        vt = np.ascontiguousarray(vol)
         try:
             v, f, _, _ = marching_cubes(vt, 0.0, allow_degenerate=True)
         except RuntimeError:  # "No surface found": the crossing was a 0 corner only
@@ -194,8 +192,7 @@ def mesh_runs(node, runs, shape, lo, voxel, normals=True) -> TriangleMesh:
         verts.append(g)
         keys.append(key)
         shares.append(share)
-        # The axis swap mirrors the mesh: reverse each face's winding back.
-        faces.append(f[:, ::-1] + np.int32(nv))
+        faces.append(f + np.int32(nv))
         nv += len(v)
     if not verts:
         raise ValueError("the field has no surface inside its bounds at this voxel size")
