@@ -99,3 +99,42 @@ def test_run_keys_recompute_scikit_image_positions_bit_for_bit():
                                       tiled_mc.DELTA)
     np.testing.assert_array_equal(keys2, keys)
     np.testing.assert_array_equal(g2[edge], g[edge])
+
+
+def test_plain_cases_emit_scikit_image_triangles():
+    """The numba path for Lewiner's plain cases (1, 2, 5, 8, 9, 11, 14) emits, for
+    every cube configuration, the triangles scikit-image emits (positions, winding),
+    and declines the cases with face or interior tests."""
+    T = tiled_mc._tables()
+    luts = (T["cases"], T["til"], T["ntri"], T["corner"], T["edge_lo"], T["edge_axis"])
+    rng = np.random.default_rng(0)
+
+    def triangles(g, f):
+        t = np.round(g[f].astype(np.float64), 5)
+        keys = [tuple(map(tuple, x)) for x in t]
+        return sorted(min(k[i:] + k[:i] for i in range(3)) for k in keys)
+
+    plain = declined = 0
+    for idx in range(1, 255):
+        for trial in range(3):
+            mags = rng.uniform(0.05, 1.0, 8)
+            vol = np.empty((2, 2, 2), np.float32)
+            for c, (di, dj, dk) in enumerate(T["corner"]):
+                vol[di, dj, dk] = mags[c] if (idx >> c) & 1 else -mags[c]
+            if trial == 2:
+                vol[0, 0, 0] = 0.0  # a corner on the surface
+            ok, g, _, _, f = tiled_mc._plain_run(vol, np.zeros(3, np.int64), np.array([0, 1, 0, 1]), 2, 2,
+                                                 tiled_mc.DELTA, *luts)
+            actual = sum(1 << c for c, (di, dj, dk) in enumerate(T["corner"]) if vol[di, dj, dk] > 0)
+            case = T["cases"][actual, 0]
+            assert ok == (case == 0 or case in tiled_mc._PLAIN)
+            if not ok:
+                declined += 1
+                continue
+            try:
+                v, ff, _, _ = marching_cubes(vol, 0.0, allow_degenerate=True)
+            except RuntimeError:
+                v, ff = np.zeros((0, 3), np.float32), np.zeros((0, 3), np.int64)
+            assert triangles(g, f) == triangles(v, ff), (idx, trial)
+            plain += 1
+    assert plain > 300 and declined > 300

@@ -34,6 +34,8 @@ from __future__ import annotations
 
 import numba
 import numpy as np
+from skimage.measure import _marching_cubes_lewiner as _lewiner
+from skimage.measure import _marching_cubes_lewiner_luts as _luts
 from skimage.measure import marching_cubes
 
 from arches_render.mesh.polygonize import TriangleMesh, oriented_mesh
@@ -163,6 +165,109 @@ def _stitch(g, faces, keys, order):
     return out_g, out_f[:m]
 
 
+#: Lewiner's cases whose tiling is a fixed table (no face or interior test).
+_PLAIN = (1, 2, 5, 8, 9, 11, 14)
+_TABLES = {}
+
+
+def _tables():
+    """scikit-image's Lewiner tables for the plain cases, as arrays for numba:
+    ``cases (256, 2)``, ``til (15, 48, 12)`` edge lists, ``ntri (15,)`` (0: not plain),
+    corner offsets ``(8, 3)`` and edge lower ends ``(12, 3)`` and axes ``(12,)`` in
+    array axes ``(i, j, k)`` (Lewiner's ``x, y, z`` are the array's axes 2, 1, 0)."""
+    if not _TABLES:
+        til = np.zeros((15, 48, 12), dtype=np.int64)
+        ntri = np.zeros(15, dtype=np.int64)
+        for c in _PLAIN:
+            a = _lewiner._to_array(getattr(_luts, f"TILING{c}"))
+            til[c, :a.shape[0], :a.shape[1]] = a
+            ntri[c] = a.shape[1] // 3
+        xyz = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)]
+        corner = np.array([(z, y, x) for x, y, z in xyz], dtype=np.int64)
+        ex, ey, ez = _lewiner.EDGETORELATIVEPOSX, _lewiner.EDGETORELATIVEPOSY, _lewiner.EDGETORELATIVEPOSZ
+        ends = np.stack([ez, ey, ex], axis=-1).astype(np.int64)  # (12 edges, 2 ends, (i, j, k))
+        edge_lo = ends.min(axis=1)
+        edge_axis = np.argmax(ends[:, 1] != ends[:, 0], axis=1).astype(np.int64)
+        _TABLES.update(cases=_lewiner._to_array(_luts.CASES).astype(np.int64), til=til, ntri=ntri,
+                       corner=corner, edge_lo=edge_lo, edge_axis=edge_axis)
+    return _TABLES
+
+
+@numba.njit(cache=True)
+def _plain_run(vol, origin, box, ny, nz, delta, cases, til, ntri, corner, edge_lo, edge_axis):
+    """Lewiner's marching cubes on one run when all its crossing cubes are plain cases:
+    the triangles scikit-image emits (same tables, same traversal, same vertex
+    positions and keys as :func:`_run_keys`), vertices numbered on first use.
+    Returns ``(ok, g, keys, share, faces)``; ``ok`` false at the first cube of
+    another case (face and interior tests: left to scikit-image)."""
+    sx, sy, sz = vol.shape
+    table = np.full(sx * sy * sz * 4, -1, dtype=np.int32)
+    cap = sx * sy * sz * 4
+    g = np.empty((cap, 3), dtype=np.float32)
+    keys = np.empty(cap, dtype=np.int64)
+    share = np.empty(cap, dtype=np.bool_)
+    faces = np.empty((4 * (sx - 1) * (sy - 1) * (sz - 1), 3), dtype=np.int32)
+    nv, nf = 0, 0
+    i0, i1, j0, j1 = box[0], box[1], box[2], box[3]
+    p = np.empty(3, dtype=np.int64)
+    tri = np.empty(3, dtype=np.int64)
+    # Cube index from the sign codes of its two horizontal faces: a face's code at
+    # level k has bit 2 di + dj for corner (di, dj); ``pair[lo, hi]`` is Lewiner's index.
+    pair = np.zeros((16, 16), dtype=np.int64)
+    for lo in range(16):
+        for hi in range(16):
+            for c in range(8):
+                q = hi if corner[c, 2] else lo
+                if (q >> (2 * corner[c, 0] + corner[c, 1])) & 1:
+                    pair[lo, hi] |= 1 << c
+    for i in range(sx - 1):
+        for j in range(sy - 1):
+            nxt = ((vol[i, j, 0] > 0) | ((vol[i, j + 1, 0] > 0) << 1) | ((vol[i + 1, j, 0] > 0) << 2)
+                   | ((vol[i + 1, j + 1, 0] > 0) << 3))
+            for k in range(sz - 1):
+                cur = nxt
+                nxt = ((vol[i, j, k + 1] > 0) | ((vol[i, j + 1, k + 1] > 0) << 1) | ((vol[i + 1, j, k + 1] > 0) << 2)
+                       | ((vol[i + 1, j + 1, k + 1] > 0) << 3))
+                idx = pair[cur, nxt]
+                case = cases[idx, 0]
+                if case == 0:
+                    continue
+                if ntri[case] == 0:
+                    return False, g[:0], keys[:0], share[:0], faces[:0]
+                cfg = cases[idx, 1]
+                for t3 in range(3 * ntri[case]):
+                    e = til[case, cfg, t3]
+                    a = edge_axis[e]
+                    p[0], p[1], p[2] = i + edge_lo[e, 0], j + edge_lo[e, 1], k + edge_lo[e, 2]
+                    v0 = np.float64(vol[p[0], p[1], p[2]])
+                    p[a] += 1
+                    v1 = np.float64(vol[p[0], p[1], p[2]])
+                    p[a] -= 1
+                    t = v0 / (v0 - v1)
+                    axis = a
+                    if t < 0.5 * delta or t > 1.0 - 0.5 * delta:  # at a grid point
+                        axis = 3
+                        if t > 0.5:
+                            p[a] += 1
+                    slot = ((p[0] * sy + p[1]) * sz + p[2]) * 4 + axis
+                    if table[slot] < 0:
+                        table[slot] = nv
+                        gi, gj, gk = p[0] + origin[0], p[1] + origin[1], p[2] + origin[2]
+                        g[nv, 0], g[nv, 1], g[nv, 2] = gi, gj, gk
+                        if axis < 3:
+                            g[nv, axis] = np.float32(np.float64(g[nv, axis]) + t)
+                        keys[nv] = ((gi * ny + gj) * nz + gk) * 4 + axis
+                        share[nv] = (axis == 3 or (axis != 0 and (gi == i0 or gi == i1))
+                                     or (axis != 1 and (gj == j0 or gj == j1)))
+                        nv += 1
+                    tri[t3 % 3] = table[slot]
+                    if t3 % 3 == 2:
+                        # scikit-image's winding ("descent" reverses Lewiner's order)
+                        faces[nf, 0], faces[nf, 1], faces[nf, 2] = tri[2], tri[1], tri[0]
+                        nf += 1
+    return True, g[:nv], keys[:nv], share[:nv], faces[:nf]
+
+
 def mesh_runs(node, runs, shape, lo, voxel, normals=True) -> TriangleMesh:
     """Stitched marching-cubes mesh of ``runs`` (see module docstring).
 
@@ -181,19 +286,26 @@ def mesh_runs(node, runs, shape, lo, voxel, normals=True) -> TriangleMesh:
     """
     verts, faces, keys, shares, nv = [], [], [], [], 0
     ny, nz = int(shape[1]), int(shape[2])
+    T = _tables()
+    luts = (T["cases"], T["til"], T["ntri"], T["corner"], T["edge_lo"], T["edge_axis"])
     for vol, origin, box in runs:
-        # (A run holds a crossing cube, so 0 lies within its values.)
-        vt = np.ascontiguousarray(vol)
-        try:
-            v, f, _, _ = marching_cubes(vt, 0.0, allow_degenerate=True)
-        except RuntimeError:  # "No surface found": the crossing was a 0 corner only
+        origin, box = np.asarray(origin, np.int64), np.asarray(box, np.int64)
+        ok, g, key, share, f = _plain_run(vol, origin, box, ny, nz, DELTA, *luts)
+        if not ok:
+            # (A run holds a crossing cube, so 0 lies within its values.)
+            vt = np.ascontiguousarray(vol)
+            try:
+                v, f, _, _ = marching_cubes(vt, 0.0, allow_degenerate=True)
+            except RuntimeError:  # "No surface found": the crossing was a 0 corner only
+                continue
+            g, key, share = _run_keys(v, vt, origin, box, ny, nz, DELTA)
+        if len(f) == 0:
             continue
-        g, key, share = _run_keys(v, vt, np.asarray(origin, np.int64), np.asarray(box, np.int64), ny, nz, DELTA)
         verts.append(g)
         keys.append(key)
         shares.append(share)
         faces.append(f + np.int32(nv))
-        nv += len(v)
+        nv += len(g)
     if not verts:
         raise ValueError("the field has no surface inside its bounds at this voxel size")
     g, f, keys = np.concatenate(verts), np.concatenate(faces), np.concatenate(keys)
