@@ -456,16 +456,14 @@ def polygonize_banded(node: Node, voxel: float | None = None, progress=None,
     voxel = float(voxel) if voxel else default_voxel(node)
     stats = stats if stats is not None else BandStats()
     band = sample_banded(node, voxel, stats, progress)
-    runs = K.crossing_runs(band.vol, band.win, band.off)
-    stats.meshed = int(sum(int(band.win[w, 2] * band.win[w, 3]) * int(c1 - c0 + 2) for w, c0, c1 in runs.tolist()))
-
-    def pieces():
-        # Windows are in tile order and, within a tile, by increasing k0; so are their runs.
-        for w, c0, c1 in runs.tolist():
-            i0, j0, sx, sy, k0, _ = (int(n) for n in band.win[w])
-            yield band.window(w)[:, :, c0:c1 + 2], (i0, j0, k0 + c0), (i0, i0 + sx - 1, j0, j0 + sy - 1)
-
-    return mesh_runs(node, pieces(), band.shape, band.lo, voxel, normals)
+    w, c0, c1 = K.crossing_runs(band.vol, band.win, band.off).T
+    i0, j0, sx, sy, k0, sz = band.win[w].T
+    # Run rows of mesh_runs: windows are in tile order and, within a tile, by
+    # increasing k0; so are their runs.
+    runs = np.stack([band.off[w] + c0, sy * sz, sz, sx, sy, c1 - c0 + 2, i0, j0, k0 + c0,
+                     i0, i0 + sx - 1, j0, j0 + sy - 1], axis=1)
+    stats.meshed = int((sx * sy * (c1 - c0 + 2)).sum())
+    return mesh_runs(node, band.vol, runs, band.shape, band.lo, voxel, normals)
 
 
 def polygonize_dense(node: Node, voxel: float | None = None, normals: bool = True) -> TriangleMesh:
@@ -484,9 +482,10 @@ def polygonize_dense(node: Node, voxel: float | None = None, normals: bool = Tru
         ii = np.arange(i, min(i + step, nx))
         idx = np.concatenate([np.repeat(ii, len(jk))[:, None], np.tile(jk, (len(ii), 1))], axis=1)
         vol[i:i + len(ii)] = evaluate(node, grid.lo + idx * voxel).reshape(len(ii), ny, nz)
-    runs = ((vol[i0:i0 + sx, j0:j0 + sy, c0:c1 + 2], (i0, j0, c0), (i0, i0 + sx - 1, j0, j0 + sy - 1))
-            for i0, j0, sx, sy, c0, c1 in K.tile_crossing_runs(vol, TILE).tolist())
-    return mesh_runs(node, runs, grid.shape, grid.lo, voxel, normals)
+    i0, j0, sx, sy, c0, c1 = K.tile_crossing_runs(vol, TILE).T
+    runs = np.stack([(i0 * ny + j0) * nz + c0, np.full_like(i0, ny * nz), np.full_like(i0, nz), sx, sy,
+                     c1 - c0 + 2, i0, j0, c0, i0, i0 + sx - 1, j0, j0 + sy - 1], axis=1)
+    return mesh_runs(node, vol.reshape(-1), runs, grid.shape, grid.lo, voxel, normals)
 
 
 def slab_mesh(root: Node, extent, z0: float, z1: float, voxel: float, border: float):

@@ -194,21 +194,40 @@ def _tables():
 
 
 @numba.njit(cache=True)
-def _plain_run(vol, origin, box, ny, nz, delta, cases, til, ntri, corner, edge_lo, edge_axis):
-    """Lewiner's marching cubes on one run when all its crossing cubes are plain cases:
-    the triangles scikit-image emits (same tables, same traversal, same vertex
-    positions and keys as :func:`_run_keys`), vertices numbered on first use.
-    Returns ``(ok, g, keys, share, faces)``; ``ok`` false at the first cube of
-    another case (face and interior tests: left to scikit-image)."""
-    sx, sy, sz = vol.shape
-    table = np.full(sx * sy * sz * 4, -1, dtype=np.int32)
-    cap = sx * sy * sz * 4
-    g = np.empty((cap, 3), dtype=np.float32)
-    keys = np.empty(cap, dtype=np.int64)
-    share = np.empty(cap, dtype=np.bool_)
-    faces = np.empty((4 * (sx - 1) * (sy - 1) * (sz - 1), 3), dtype=np.int32)
-    nv, nf = 0, 0
-    i0, i1, j0, j1 = box[0], box[1], box[2], box[3]
+def _grow(a, n):
+    """``a`` with room for at least ``n`` rows (doubling)."""
+    if n <= a.shape[0]:
+        return a
+    shape = (max(n, 2 * a.shape[0]),) + a.shape[1:]
+    b = np.empty(shape, dtype=a.dtype)
+    b[:a.shape[0]] = a
+    return b
+
+
+# (error_model numpy: no ZeroDivisionError check; a crossing edge has v0 > 0 >= v1 or the reverse.)
+@numba.njit(cache=True, error_model="numpy")
+def _plain_runs(flat, runs, ny, nz, delta, cases, til, ntri, corner, edge_lo, edge_axis):
+    """Lewiner's marching cubes on every run whose crossing cubes are all plain cases:
+    the triangles scikit-image emits (same tables, same traversal, same winding,
+    vertex positions and keys as :func:`_run_keys`), vertices numbered on first use.
+
+    ``runs[r] = (base, si, sj, sx, sy, sz, oi, oj, ok, i0, i1, j0, j1)``: the run's
+    value at ``(i, j, k)`` is ``flat[base + i si + j sj + k]``, its grid origin is
+    ``(oi, oj, ok)``, its tile ``(i0, i1, j0, j1)``. Returns ``(g, keys, share, faces,
+    declined)``: the runs with a cube of another case (face and interior tests) are
+    rolled back and listed in ``declined``, for scikit-image.
+    """
+    vmax = 0
+    for r in range(runs.shape[0]):
+        vmax = max(vmax, runs[r, 3] * runs[r, 4] * runs[r, 5])
+    table = np.full(vmax * 4, -1, dtype=np.int32)
+    g = np.empty((1 << 16, 3), dtype=np.float32)
+    keys = np.empty(1 << 16, dtype=np.int64)
+    share = np.empty(1 << 16, dtype=np.bool_)
+    faces = np.empty((1 << 17, 3), dtype=np.int32)
+    declined = np.empty(runs.shape[0], dtype=np.int64)
+    touched = np.empty(1 << 16, dtype=np.int64)
+    nv, nf, nd, nt = 0, 0, 0, 0
     p = np.empty(3, dtype=np.int64)
     tri = np.empty(3, dtype=np.int64)
     # Cube index from the sign codes of its two horizontal faces: a face's code at
@@ -220,97 +239,148 @@ def _plain_run(vol, origin, box, ny, nz, delta, cases, til, ntri, corner, edge_l
                 q = hi if corner[c, 2] else lo
                 if (q >> (2 * corner[c, 0] + corner[c, 1])) & 1:
                     pair[lo, hi] |= 1 << c
-    for i in range(sx - 1):
-        for j in range(sy - 1):
-            nxt = ((vol[i, j, 0] > 0) | ((vol[i, j + 1, 0] > 0) << 1) | ((vol[i + 1, j, 0] > 0) << 2)
-                   | ((vol[i + 1, j + 1, 0] > 0) << 3))
-            for k in range(sz - 1):
-                cur = nxt
-                nxt = ((vol[i, j, k + 1] > 0) | ((vol[i, j + 1, k + 1] > 0) << 1) | ((vol[i + 1, j, k + 1] > 0) << 2)
-                       | ((vol[i + 1, j + 1, k + 1] > 0) << 3))
-                idx = pair[cur, nxt]
-                case = cases[idx, 0]
-                if case == 0:
-                    continue
-                if ntri[case] == 0:
-                    return False, g[:0], keys[:0], share[:0], faces[:0]
-                cfg = cases[idx, 1]
-                for t3 in range(3 * ntri[case]):
-                    e = til[case, cfg, t3]
-                    a = edge_axis[e]
-                    p[0], p[1], p[2] = i + edge_lo[e, 0], j + edge_lo[e, 1], k + edge_lo[e, 2]
-                    v0 = np.float64(vol[p[0], p[1], p[2]])
-                    p[a] += 1
-                    v1 = np.float64(vol[p[0], p[1], p[2]])
-                    p[a] -= 1
-                    t = v0 / (v0 - v1)
-                    axis = a
-                    if t < 0.5 * delta or t > 1.0 - 0.5 * delta:  # at a grid point
-                        axis = 3
-                        if t > 0.5:
-                            p[a] += 1
-                    slot = ((p[0] * sy + p[1]) * sz + p[2]) * 4 + axis
-                    if table[slot] < 0:
-                        table[slot] = nv
-                        gi, gj, gk = p[0] + origin[0], p[1] + origin[1], p[2] + origin[2]
-                        g[nv, 0], g[nv, 1], g[nv, 2] = gi, gj, gk
-                        if axis < 3:
-                            g[nv, axis] = np.float32(np.float64(g[nv, axis]) + t)
-                        keys[nv] = ((gi * ny + gj) * nz + gk) * 4 + axis
-                        share[nv] = (axis == 3 or (axis != 0 and (gi == i0 or gi == i1))
-                                     or (axis != 1 and (gj == j0 or gj == j1)))
-                        nv += 1
-                    tri[t3 % 3] = table[slot]
-                    if t3 % 3 == 2:
-                        # scikit-image's winding ("descent" reverses Lewiner's order)
-                        faces[nf, 0], faces[nf, 1], faces[nf, 2] = tri[2], tri[1], tri[0]
-                        nf += 1
-    return True, g[:nv], keys[:nv], share[:nv], faces[:nf]
+    for r in range(runs.shape[0]):
+        base, si, sj, sx, sy, sz = runs[r, 0], runs[r, 1], runs[r, 2], runs[r, 3], runs[r, 4], runs[r, 5]
+        oi, oj, ok, i0, i1, j0, j1 = runs[r, 6], runs[r, 7], runs[r, 8], runs[r, 9], runs[r, 10], runs[r, 11], runs[r, 12]
+        nv0, nf0 = nv, nf
+        fail = False
+        for i in range(sx - 1):
+            for j in range(sy - 1):
+                b00 = base + i * si + j * sj
+                b01, b10 = b00 + sj, b00 + si
+                b11 = b10 + sj
+                nxt = (flat[b00] > 0) | ((flat[b01] > 0) << 1) | ((flat[b10] > 0) << 2) | ((flat[b11] > 0) << 3)
+                # Room for this column of cubes (at most 12 vertices, 4 faces a cube).
+                if nv + 12 * sz > g.shape[0]:
+                    g = _grow(g, nv + 12 * sz)
+                    keys = _grow(keys, nv + 12 * sz)
+                    share = _grow(share, nv + 12 * sz)
+                if nf + 4 * sz > faces.shape[0]:
+                    faces = _grow(faces, nf + 4 * sz)
+                if nt + 24 * sz > touched.shape[0]:
+                    touched = _grow(touched, nt + 24 * sz)
+                for k in range(sz - 1):
+                    cur = nxt
+                    nxt = ((flat[b00 + k + 1] > 0) | ((flat[b01 + k + 1] > 0) << 1) | ((flat[b10 + k + 1] > 0) << 2)
+                           | ((flat[b11 + k + 1] > 0) << 3))
+                    idx = pair[cur, nxt]
+                    if idx == 0 or idx == 255:
+                        continue
+                    case = cases[idx, 0]
+                    if case == 0:
+                        continue
+                    if ntri[case] == 0:
+                        fail = True
+                        break
+                    cfg = cases[idx, 1]
+                    for t3 in range(3 * ntri[case]):
+                        e = til[case, cfg, t3]
+                        a = edge_axis[e]
+                        p[0], p[1], p[2] = i + edge_lo[e, 0], j + edge_lo[e, 1], k + edge_lo[e, 2]
+                        # An edge's slot holds its vertex (or the grid point's it snapped to).
+                        slot = ((p[0] * sy + p[1]) * sz + p[2]) * 4 + a
+                        if table[slot] < 0:
+                            touched[nt] = slot
+                            nt += 1
+                            q0 = base + p[0] * si + p[1] * sj + p[2]
+                            v0 = np.float64(flat[q0])
+                            v1 = np.float64(flat[q0 + (si if a == 0 else sj if a == 1 else 1)])
+                            t = v0 / (v0 - v1)
+                            axis = a
+                            vslot = slot
+                            if t < 0.5 * delta or t > 1.0 - 0.5 * delta:  # at a grid point
+                                axis = 3
+                                if t > 0.5:
+                                    p[a] += 1
+                                vslot = ((p[0] * sy + p[1]) * sz + p[2]) * 4 + 3
+                            if table[vslot] < 0:
+                                table[vslot] = nv - nv0
+                                if vslot != slot:
+                                    touched[nt] = vslot
+                                    nt += 1
+                                gi, gj, gk = p[0] + oi, p[1] + oj, p[2] + ok
+                                g[nv, 0], g[nv, 1], g[nv, 2] = gi, gj, gk
+                                if axis < 3:
+                                    g[nv, axis] = np.float32(np.float64(g[nv, axis]) + t)
+                                keys[nv] = ((gi * ny + gj) * nz + gk) * 4 + axis
+                                # Deduplicated within the run: only the tile's side faces are shared.
+                                share[nv] = ((axis != 0 and (gi == i0 or gi == i1))
+                                             or (axis != 1 and (gj == j0 or gj == j1)))
+                                nv += 1
+                            table[slot] = table[vslot]
+                        tri[t3 % 3] = nv0 + table[slot]
+                        if t3 % 3 == 2:
+                            # scikit-image's winding ("descent" reverses Lewiner's order)
+                            faces[nf, 0], faces[nf, 1], faces[nf, 2] = tri[2], tri[1], tri[0]
+                            nf += 1
+                if fail:
+                    break
+            if fail:
+                break
+        for q in range(nt):
+            table[touched[q]] = -1
+        nt = 0
+        if fail:
+            nv, nf = nv0, nf0
+            declined[nd] = r
+            nd += 1
+    return g[:nv], keys[:nv], share[:nv], faces[:nf], declined[:nd]
 
 
-def mesh_runs(node, runs, shape, lo, voxel, normals=True) -> TriangleMesh:
+def _plain_run(vol, origin, box, ny, nz, delta, *luts):
+    """:func:`_plain_runs` on one ``(sx, sy, sz)`` array: ``(ok, g, keys, share, faces)``."""
+    vol = np.ascontiguousarray(vol, dtype=np.float32)
+    sx, sy, sz = vol.shape
+    run = np.array([[0, sy * sz, sz, sx, sy, sz, *origin, *box]], dtype=np.int64)
+    g, keys, share, faces, declined = _plain_runs(vol.reshape(-1), run, ny, nz, delta, *luts)
+    return len(declined) == 0, g, keys, share, faces
+
+
+def mesh_runs(node, flat, runs, shape, lo, voxel, normals=True) -> TriangleMesh:
     """Stitched marching-cubes mesh of ``runs`` (see module docstring).
 
     Parameters
     ----------
     node : Node
         The field (for normals).
-    runs : iterable of (numpy.ndarray, tuple, tuple)
-        ``(values (sx, sy, sz), (i0, j0, k0) origin, (i0, i1, j0, j1) tile)`` in tile
-        order, then increasing ``k0``.
+    flat : numpy.ndarray
+        1-D float32 values the runs index.
+    runs : numpy.ndarray
+        ``(R, 13)`` rows ``(base, si, sj, sx, sy, sz, oi, oj, ok, i0, i1, j0, j1)`` in
+        tile order, then increasing ``ok`` (see :func:`_plain_runs`).
     shape, lo, voxel
         The grid.
     normals : bool
         Field normals and one orientation (``oriented_mesh``); else none and
         scikit-image's winding.
     """
-    verts, faces, keys, shares, nv = [], [], [], [], 0
     ny, nz = int(shape[1]), int(shape[2])
     T = _tables()
     luts = (T["cases"], T["til"], T["ntri"], T["corner"], T["edge_lo"], T["edge_axis"])
-    for vol, origin, box in runs:
-        origin, box = np.asarray(origin, np.int64), np.asarray(box, np.int64)
-        ok, g, key, share, f = _plain_run(vol, origin, box, ny, nz, DELTA, *luts)
-        if not ok:
+    g, keys, share, f, declined = _plain_runs(flat, runs, ny, nz, DELTA, *luts)
+    verts, faces, keyl, shares, nv = [g], [f], [keys], [share], len(g)
+    # The runs with face or interior tests, through scikit-image (after the plain
+    # ones: the same order for the banded and the dense mesh).
+    for r in declined.tolist():
+        base, si, sj, sx, sy, sz, oi, oj, ok, *box = runs[r].tolist()
+        vt = np.lib.stride_tricks.as_strided(flat[base:], (sx, sy, sz), (4 * si, 4 * sj, 4), writeable=False)
+        vt = np.ascontiguousarray(vt)
+        try:
             # (A run holds a crossing cube, so 0 lies within its values.)
-            vt = np.ascontiguousarray(vol)
-            try:
-                v, f, _, _ = marching_cubes(vt, 0.0, allow_degenerate=True)
-            except RuntimeError:  # "No surface found": the crossing was a 0 corner only
-                continue
-            g, key, share = _run_keys(v, vt, origin, box, ny, nz, DELTA)
-        if len(f) == 0:
+            v, f, _, _ = marching_cubes(vt, 0.0, allow_degenerate=True)
+        except RuntimeError:  # "No surface found": the crossing was a 0 corner only
             continue
+        g, key, sh = _run_keys(v, vt, np.array([oi, oj, ok]), np.array(box), ny, nz, DELTA)
         verts.append(g)
-        keys.append(key)
-        shares.append(share)
-        faces.append(f + np.int32(nv))
+        keyl.append(key)
+        shares.append(sh)
+        faces.append(f.astype(np.int32) + np.int32(nv))
         nv += len(g)
-    if not verts:
+    if nv == 0:
         raise ValueError("the field has no surface inside its bounds at this voxel size")
-    g, f, keys = np.concatenate(verts), np.concatenate(faces), np.concatenate(keys)
+    g, f, keys = np.concatenate(verts), np.concatenate(faces), np.concatenate(keyl)
     cand = np.flatnonzero(np.concatenate(shares))
-    g, f = _stitch(g, f, keys, cand[np.argsort(keys[cand], kind="stable")])  # stable: first in tile order leads
+    g, f = _stitch(g, f, keys, cand[np.argsort(keys[cand], kind="stable")])  # stable: first in order leads
     # float32 -> float64 first, as scikit-image's ``vertices * spacing``.
     v = (g.astype(np.float64) * voxel + lo).astype(np.float32)
     if not normals:
