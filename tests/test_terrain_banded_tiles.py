@@ -50,6 +50,9 @@ def test_tiled_banded_equals_dense_and_is_o_band():
     assert stats.band <= stats.allocated < 0.6 * stats.voxels
     assert stats.allocated < 3 * stats.band
     assert 0 < stats.meshed <= stats.allocated
+    # Stitched: the solid's surface is closed across every tile border.
+    import trimesh
+    assert trimesh.Trimesh(mb.vertices, mb.faces, process=False).is_watertight
 
 
 def test_tiles_stitch_into_one_marching_cubes_of_the_grid():
