@@ -136,10 +136,11 @@ def _run_keys(v, vt, origin, box, ny, nz, delta):
 
 
 @numba.njit(cache=True)
-def _stitch(g, faces, keys, order):
+def _stitch(g, faces, keys, order, voxel, lo):
     """Merge the vertices ``order`` (shareable, sorted by key, stably) of equal key into
-    the first one in tile order, renumber the kept vertices in order, and drop the
-    faces that then repeat a vertex."""
+    the first one in tile order, renumber the kept vertices in order (world
+    coordinates ``g voxel + lo``, float32 -> float64 first as scikit-image's
+    ``vertices * spacing``), and drop the faces that then repeat a vertex."""
     n = len(g)
     rep = np.arange(n)
     for s in range(1, len(order)):
@@ -151,10 +152,11 @@ def _stitch(g, faces, keys, order):
         if rep[q] == q:
             new[q] = kept
             kept += 1
-    out_g = np.empty((kept, 3), dtype=g.dtype)
+    out_g = np.empty((kept, 3), dtype=np.float32)
     for q in range(n):
         if rep[q] == q:
-            out_g[new[q]] = g[q]
+            for a in range(3):
+                out_g[new[q], a] = np.float32(np.float64(g[q, a]) * voxel + lo[a])
     out_f = np.empty(faces.shape, dtype=np.uint32)
     m = 0
     for r in range(len(faces)):
@@ -380,9 +382,8 @@ def mesh_runs(node, flat, runs, shape, lo, voxel, normals=True) -> TriangleMesh:
         raise ValueError("the field has no surface inside its bounds at this voxel size")
     g, f, keys = np.concatenate(verts), np.concatenate(faces), np.concatenate(keyl)
     cand = np.flatnonzero(np.concatenate(shares))
-    g, f = _stitch(g, f, keys, cand[np.argsort(keys[cand], kind="stable")])  # stable: first in order leads
-    # float32 -> float64 first, as scikit-image's ``vertices * spacing``.
-    v = (g.astype(np.float64) * voxel + lo).astype(np.float32)
+    # (stable sort: the first in order leads)
+    v, f = _stitch(g, f, keys, cand[np.argsort(keys[cand], kind="stable")], float(voxel), np.asarray(lo, np.float64))
     if not normals:
         return TriangleMesh(v, f, np.zeros((0, 3), dtype=np.float32))
     return oriented_mesh(node, v, f, voxel)
