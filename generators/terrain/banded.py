@@ -30,7 +30,7 @@ sampling every vertex, the tree is asked where its surface can be:
   is met, so the field keeps one sign along that run, the sign of the band voxel
   next to it (a sign change on that edge would be a crossing, whose two end points
   are in the band); the run is filled with ``+-voxel`` (as ``sample_grid`` fills
-  certified blocks). A column without band voxels costs one evaluation.
+  certified blocks). A window column without band voxels costs one evaluation.
 * **Direct elevation extraction.** When the tree is a terrain with compactly
   supported modifiers (sum, erosion, local warp of skeletal sets), a column that
   no support touches holds the terrain's field alone, which is a closed form of
@@ -42,12 +42,19 @@ sampling every vertex, the tree is asked where its surface can be:
   within float32 rounding of 0, whose sign could differ from the tree's own
   arithmetic, are left to the tree.
 
-Marching cubes then runs only on the cubes of the band whose corners change sign.
+**Windows, O(band).** Nothing is allocated or scanned per grid voxel: the band is
+kept as marks (column intervals, index boxes), and the columns are cut into tiles
+(:mod:`.tiled_mc`); each tile holds one *window* per run of levels where some of its
+columns has band voxels (a level without any is a layer of non-crossing cubes on
+both sides, so runs separated by it mesh apart). Values, gap filling and the search
+for crossing cubes touch the windows only (:mod:`.banded_kernels`), and marching
+cubes runs on each window's runs of crossing layers.
+
 Cubes crossed by the surface see exactly the values a dense sampling gives them
 (up to float rounding of the direct extraction), and every other cube sees one
-sign, so the mesh is the dense marching-cubes mesh of the same grid (tested
-against :func:`polygonize_dense`). Vertex normals are central differences of the
-field, as in ``polygonize``.
+sign, so the mesh is the one :func:`polygonize_dense` builds the same way from
+every vertex of the grid (tested bit for bit in its faces). Vertex normals are
+central differences of the field, as in ``polygonize``.
 
 References
 ----------
@@ -63,10 +70,8 @@ from dataclasses import dataclass, field
 
 import drjit as dr
 import mitsuba as mi
-import numba
 import numpy as np
 from scipy.ndimage import maximum_filter, minimum_filter
-from skimage.measure import marching_cubes
 
 from arches_render.backend import variant
 from arches_render.field import Node, evaluate
@@ -74,12 +79,15 @@ from arches_render.field.heightfield import Heightfield
 from arches_render.field.node import finite_box
 from arches_render.field.operators import Difference, Intersection, Union
 from arches_render.field.primitives import Box
-from arches_render.mesh.polygonize import MAX_VOXELS, TriangleMesh, default_voxel, oriented_mesh
+from arches_render.mesh.polygonize import MAX_VOXELS, TriangleMesh, default_voxel
+
+from . import banded_kernels as K
 
 from .erosion_node import Erosion
 from .implicit_heightfield import R0_FACTOR, ImplicitHeightfield
 from .operators import LocalWarp, Sum
 from .skeletal_set import SkeletalSet
+from .tiled_mc import TILE, mesh_runs
 
 __all__ = ["BandStats", "sample_banded", "polygonize_banded", "polygonize_dense", "slab_mesh"]
 
@@ -92,11 +100,17 @@ class BandStats:
     """What the banded sampler did (for reports and benchmarks)."""
 
     voxels: int = 0
+    #: Band voxels of the windows; a tile's last column is also its neighbour's
+    #: first, so band, evaluated and direct count those columns twice (~6 %).
     band: int = 0
     evaluated: int = 0
     direct: int = 0
-    #: Columns without band voxels (one evaluation each).
+    #: Window columns without band voxels (one evaluation each).
     runs: int = 0
+    #: Voxels of the windows (allocated, filled and scanned for crossings; O(band)).
+    allocated: int = 0
+    #: Voxels handed to marching cubes (the crossing runs).
+    meshed: int = 0
     #: Fraction of the grid's columns touched by non-terrain nodes (the paper's ``a``).
     coverage: float = 0.0
     notes: list = field(default_factory=list)
@@ -131,9 +145,18 @@ class _Grid:
         if np.prod(self.shape) > MAX_VOXELS:
             raise ValueError(f"voxel {voxel:g} m gives a {self.shape.tolist()} grid "
                              f"({np.prod(self.shape):.3g} voxels, at most {MAX_VOXELS:.3g}): use a larger voxel")
-        self.mask = np.zeros(tuple(self.shape), dtype=bool)
+        # The band as marks, never as a grid-sized mask (O(columns + boxes) memory):
+        # column intervals [K0, K1] ((nx, ny) int arrays, empty where K0 > K1) and
+        # inclusive index boxes (i0, j0, k0, i1, j1, k1).
+        self.intervals = []
+        self.boxes = []
         self.other = np.zeros(tuple(self.shape[:2]), dtype=bool)  # columns touched by non-terrain marks
         self.terrains = []
+
+    def mark_intervals(self, k0, k1):
+        """Mark levels ``[k0, k1]`` (float or int arrays over the columns) of each column."""
+        top = int(self.shape[2]) - 1
+        self.intervals.append((np.clip(k0, 0, top + 1).astype(np.int32), np.clip(k1, -1, top).astype(np.int32)))
 
     def index_range(self, blo, bhi):
         """Inclusive vertex index ranges of the cells a box touches (clipped), or None."""
@@ -148,7 +171,7 @@ class _Grid:
         if r is None:
             return
         (a, b, c), (d, e, f) = r
-        self.mask[a:d + 1, b:e + 1, c:f + 1] = True
+        self.boxes.append(np.array([[a, b, c, d, e, f]], dtype=np.int64))
         if other:
             self.other[a:d + 1, b:e + 1] = True
 
@@ -160,8 +183,8 @@ class _Grid:
         keep = np.all(i1 >= 0, axis=1) & np.all(i0 <= self.shape - 1, axis=1)
         i0 = np.clip(i0[keep], 0, self.shape - 1)
         i1 = np.clip(i1[keep], 0, self.shape - 1)
-        for (a, b, c), (d, e, f) in zip(i0.tolist(), i1.tolist()):
-            self.mask[a:d + 1, b:e + 1, c:f + 1] = True
+        self.boxes.append(np.concatenate([i0, i1], axis=1))
+        for (a, b, _), (d, e, _) in zip(i0.tolist(), i1.tolist()):
             self.other[a:d + 1, b:e + 1] = True
 
     def columns(self):
@@ -198,21 +221,22 @@ def _mark_terrain(grid: _Grid, node):
     pad = node.slope_bound * v / math.sqrt(2.0) + eps
     hlo = minimum_filter(h, size=3, mode="nearest") - pad
     hhi = maximum_filter(h, size=3, mode="nearest") + pad
-    k = np.arange(grid.shape[2])
-    k0 = np.floor((hlo - grid.lo[2]) / v)[..., None]
-    k1 = np.ceil((hhi - grid.lo[2]) / v)[..., None]
-    grid.mask |= (k >= k0) & (k <= k1)
+    k0 = np.floor((hlo - grid.lo[2]) / v)
+    k1 = np.ceil((hhi - grid.lo[2]) / v)
+    grid.mark_intervals(k0, k1)
     (rx0, ry0, rx1, ry1), zb = _walls_and_bottom(node)
     kb0 = int(math.floor((zb - eps - grid.lo[2]) / v))
     kb1 = int(math.ceil((zb + eps - grid.lo[2]) / v))
-    grid.mask[:, :, max(kb0, 0):max(kb1 + 1, 0)] = True
+    nx, ny, nz = (int(n) for n in grid.shape)
+    if kb1 >= 0 and kb0 <= nz - 1:
+        grid.boxes.append(np.array([[0, 0, max(kb0, 0), nx - 1, ny - 1, min(kb1, nz - 1)]], dtype=np.int64))
     # Near the prism's sides the wall lies between the bottom and the ground (above
     # the ground the field is already negative): mark that span of the column.
     # Closed comparisons (with rounding slack): a column one voxel from the wall has
     # a cell that touches it.
     w = v * (1.0 + 1e-6) + 1e-6 * (abs(rx0) + abs(rx1) + abs(ry0) + abs(ry1))
     wall = (X <= rx0 + w) | (X >= rx1 - w) | (Y <= ry0 + w) | (Y >= ry1 - w)
-    grid.mask[wall] |= (k >= kb0) & (k <= k1[wall])
+    grid.mark_intervals(np.where(wall, kb0, nz), np.where(wall, k1, -1))
     grid.terrains.append((node, h))
 
 
@@ -308,192 +332,109 @@ def _direct_params(terrain, boxes):
     return kind, np.asarray(params, dtype=np.float32), b.reshape(-1, 7)
 
 
-def sample_banded(node: Node, voxel: float, stats: BandStats | None = None, progress=None):
-    """Sample the field where its surface can be (see module docstring).
+@dataclass
+class Band:
+    """The sampled band: windows (see :mod:`.banded_kernels`) and their flat values."""
+
+    win: np.ndarray
+    off: np.ndarray
+    vol: np.ndarray
+    mask: np.ndarray
+    shape: np.ndarray
+    lo: np.ndarray
+
+    def window(self, w):
+        """Values of window ``w`` as an ``(sx, sy, sz)`` view."""
+        sx, sy, sz = (int(n) for n in self.win[w, [2, 3, 5]])
+        return self.vol[self.off[w]:self.off[w + 1]].reshape(sx, sy, sz)
+
+
+def _windows(grid: _Grid):
+    """Windows ``(i0, j0, sx, sy, k0, sz)`` of each tile's runs of band levels (at least
+    two levels: a cube with a corner off the band does not cross, module docstring),
+    their flat offsets, and the box lists of the tiles."""
+    nx, ny, nz = (int(n) for n in grid.shape)
+    ntx, nty = -(-(nx - 1) // TILE), -(-(ny - 1) // TILE)
+    K0 = np.stack([k for k, _ in grid.intervals]) if grid.intervals else np.zeros((0, nx, ny), np.int32)
+    K1 = np.stack([k for _, k in grid.intervals]) if grid.intervals else np.zeros((0, nx, ny), np.int32)
+    boxes = np.concatenate(grid.boxes) if grid.boxes else np.zeros((0, 6), np.int64)
+    occ, ptr, idx = K.tile_levels(TILE, ntx, nty, nz, K0, K1, boxes)
+    edge = np.diff(np.pad(occ.reshape(-1, nz), ((0, 0), (1, 1))).astype(np.int8), axis=1)
+    t, k0 = np.nonzero(edge == 1)
+    _, k1 = np.nonzero(edge == -1)  # same row-major order: runs pair up
+    keep = k1 - k0 >= 2
+    t, k0, sz = t[keep], k0[keep], (k1 - k0)[keep]
+    i0, j0 = (t // nty) * TILE, (t % nty) * TILE
+    sx, sy = np.minimum(TILE, nx - 1 - i0) + 1, np.minimum(TILE, ny - 1 - j0) + 1
+    win = np.stack([i0, j0, sx, sy, k0, sz], axis=1).astype(np.int64)
+    off = np.concatenate([[0], np.cumsum(sx * sy * sz)]).astype(np.int64)
+    return win, off, (K0, K1, boxes, ptr, idx)
+
+
+def sample_banded(node: Node, voxel: float, stats: BandStats | None = None, progress=None) -> Band:
+    """Sample the field where its surface can be (see module docstring), window by
+    window: memory and work are those of the windows, O(band), not of the grid.
 
     Returns
     -------
-    (numpy.ndarray, numpy.ndarray, numpy.ndarray)
-        Values ``(nx, ny, nz)`` (exact in the band, ``+-voxel`` elsewhere), the band
-        mask and the grid origin.
+    Band
+        Window values (exact in the band, ``+-voxel`` elsewhere) and band mask.
     """
     stats = stats if stats is not None else BandStats()
     grid = _Grid(node, voxel)
     _mark(grid, node, stats)
-    mask, shape, lo = grid.mask, grid.shape, grid.lo
-    stats.voxels, stats.band = int(np.prod(shape)), int(mask.sum())
+    shape, lo = grid.shape, grid.lo
+    win, off, (K0, K1, boxes, ptr, idx) = _windows(grid)
+    n = int(off[-1])
+    mask = np.zeros(n, dtype=bool)
+    vol = np.zeros(n, dtype=np.float32)
+    stats.voxels, stats.allocated = int(np.prod(shape)), n
+    stats.band = int(K.window_mask(win, off, TILE, -(-(int(shape[1]) - 1) // TILE), K0, K1, boxes, ptr, idx, mask))
     stats.coverage = float(grid.other.mean())
-    vol = np.zeros(tuple(shape), dtype=np.float32)
-    nz = shape[2]
     terrain, clip_boxes = _direct_terrain(node)
-    h_cols = None
-    if terrain is not None:
-        h_cols = next(h for t, h in grid.terrains if t is terrain)
-    direct_cols = (~grid.other) if terrain is not None else np.zeros(tuple(shape[:2]), dtype=bool)
-
     if terrain is not None:
         # Direct columns: the closed form from the column's elevation (numba, float32).
-        kind, params, boxes = _direct_params(terrain, clip_boxes)
-        stats.direct = int(_kernels()["direct_fill"](
-            vol.reshape(-1, nz), mask.reshape(-1, nz), direct_cols.ravel(), h_cols.astype(np.float32).ravel(),
-            int(shape[1]), lo.astype(np.float32), np.float32(voxel), kind, params, boxes))
-    band_idx = np.flatnonzero(((mask & ~direct_cols[:, :, None]) | np.isnan(vol)).ravel())
+        h_cols = next(h for t, h in grid.terrains if t is terrain)
+        direct = ~grid.other
+        kind, params, cboxes = _direct_params(terrain, clip_boxes)
+        stats.direct = int(K.direct_fill(vol, mask, win, off, direct, h_cols.astype(np.float32),
+                                         lo.astype(np.float32), np.float32(voxel), kind, params, cboxes))
+    else:
+        direct = np.zeros(tuple(shape[:2]), dtype=bool)
 
-    def values(lin):
-        """Field values of the tree at linear voxel indices."""
-        col, k = np.divmod(lin, nz)
-        i, j = np.divmod(col, shape[1])
-        pts = lo + np.stack([i, j, k], axis=1) * voxel
+    def values(ijk):
+        """Field values of the tree at grid indices (the dense grid's points exactly)."""
+        pts = lo + ijk * voxel
         batch = 1 << 21
-        out = np.empty(len(lin), dtype=np.float32)
+        out = np.empty(len(pts), dtype=np.float32)
         for s in range(0, len(pts), batch):
             out[s:s + batch] = evaluate(node, pts[s:s + batch])
             if progress:
                 progress(min(s + batch, len(pts)), len(pts))
-        stats.evaluated += len(lin)
+        stats.evaluated += len(pts)
         return out
 
-    vflat = vol.reshape(-1)
-    vflat[band_idx] = values(band_idx)
+    pos, ijk = K.to_evaluate(vol, mask, win, off, direct)
+    vol[pos] = values(ijk)
     # A gap voxel has the sign of the band voxel next to it: a sign change on that
-    # edge would be a surface crossing, whose end points are both in the band.
-    empty = _fill_gaps(vol.reshape(-1, nz), mask.reshape(-1, nz), np.float32(voxel))
-    if len(empty):
-        sign = np.where(values(empty * nz) > 0, np.float32(voxel), np.float32(-voxel))
-        vol.reshape(-1, nz)[empty] = sign[:, None]
-    stats.runs = len(empty)
-    return vol, mask, lo
-
-
-_NUMBA = {}
-
-
-def _kernels():
-    """numba kernels (compiled once, cached on disk)."""
-    if _NUMBA:
-        return _NUMBA
-
-    @numba.njit(parallel=True, cache=True)
-    def fill_gaps(vol, mask, voxel):
-        ncol, nz = mask.shape
-        empty = np.zeros(ncol, dtype=np.bool_)
-        for c in numba.prange(ncol):
-            first = -1
-            last = 0.0
-            for k in range(nz):
-                if mask[c, k]:
-                    last = voxel if vol[c, k] > 0 else -voxel
-                    if first < 0:
-                        first = k
-                        for q in range(k):
-                            vol[c, q] = last
-                elif first >= 0:
-                    vol[c, k] = last
-            if first < 0:
-                empty[c] = True
-        return empty
-
-    @numba.njit(parallel=True, cache=True)
-    def crossing_corners(vol, out):
-        nx, ny, nz = vol.shape
-        for i in numba.prange(nx - 1):
-            for j in range(ny - 1):
-                for k in range(nz - 1):
-                    n = 0
-                    for di in range(2):
-                        for dj in range(2):
-                            for dk in range(2):
-                                if vol[i + di, j + dj, k + dk] > 0:
-                                    n += 1
-                    if 0 < n < 8:
-                        for di in range(2):
-                            for dj in range(2):
-                                for dk in range(2):
-                                    out[i + di, j + dj, k + dk] = True
-
-    @numba.njit(parallel=True, cache=True)
-    def direct_fill(vol, mask, direct, h, ny, lo, voxel, kind, P, boxes):
-        ncol, nz = mask.shape
-        one, two, zero = np.float32(1.0), np.float32(2.0), np.float32(0.0)
-        count = np.zeros(ncol, dtype=np.int64)
-        for c in numba.prange(ncol):
-            if not direct[c]:
-                continue
-            x = lo[0] + np.float32(c // ny) * voxel
-            y = lo[1] + np.float32(c % ny) * voxel
-            hc = h[c]
-            for k in range(nz):
-                if not mask[c, k]:
-                    continue
-                z = lo[2] + np.float32(k) * voxel
-                if kind == 0:
-                    v = hc - z
-                    m = min(abs(v), P[0])
-                    st = m + m * m * (P[1] + P[2] * m)
-                    if v < 0:
-                        st = -st
-                    dx = max(max(P[4] - x, x - P[7]), zero)
-                    dy = max(max(P[5] - y, y - P[8]), zero)
-                    dz = max(max(P[6] - z, z - P[9]), zero)
-                    u = np.sqrt(dx * dx + dy * dy + dz * dz) / P[0]
-                    w = max(one - u * u, zero)
-                    f = min(st, P[3] * (two * w * w * w - one))
-                else:
-                    qx = abs(x - P[0]) - P[3]
-                    qy = abs(y - P[1]) - P[4]
-                    qz = abs(z - P[2]) - P[5]
-                    out = np.sqrt(max(qx, zero) ** 2 + max(qy, zero) ** 2 + max(qz, zero) ** 2)
-                    f = min(hc - z, -(out + min(max(max(qx, qy), qz), zero)))
-                scale = abs(hc) + abs(z) + abs(x) + abs(y) + abs(P[0]) + abs(P[3])
-                for b in range(boxes.shape[0]):
-                    qx = abs(x - boxes[b, 0]) - boxes[b, 3]
-                    qy = abs(y - boxes[b, 1]) - boxes[b, 4]
-                    qz = abs(z - boxes[b, 2]) - boxes[b, 5]
-                    out = np.sqrt(max(qx, zero) ** 2 + max(qy, zero) ** 2 + max(qz, zero) ** 2)
-                    f = min(f, boxes[b, 6] - (out + min(max(max(qx, qy), qz), zero)))
-                # Within float32 rounding of 0 the sign could differ from the tree's own
-                # evaluation: leave those to the tree (NaN marks them).
-                if abs(f) <= np.float32(1e-5) * scale:
-                    f = np.float32(np.nan)
-                else:
-                    count[c] += 1
-                vol[c, k] = f
-        return count.sum()
-
-    _NUMBA.update(fill_gaps=fill_gaps, crossing_corners=crossing_corners, direct_fill=direct_fill)
-    return _NUMBA
-
-
-def _fill_gaps(vol2d, mask2d, voxel):
-    """Fill each column's non-band voxels with ``+-voxel`` (the sign of the nearest band
-    voxel below, or above for the lowest run); returns the columns without any band
-    voxel (their sign needs one evaluation)."""
-    return np.flatnonzero(_kernels()["fill_gaps"](vol2d, mask2d, voxel))
-
-
-def _crossing_cubes(vol):
-    """The corners of the cubes whose corners do not all share a sign (numba)."""
-    out = np.zeros(vol.shape, dtype=bool)
-    _kernels()["crossing_corners"](vol, out)
-    return out
-
-
-def _mesh(node, vol, lo, voxel, mask=None, normals=True) -> TriangleMesh:
-    """Marching cubes + field normals + one global orientation, as in
-    :func:`~arches_render.mesh.polygonize.polygonize`. Without ``normals`` the mesh
-    has no normals and scikit-image's winding."""
-    if not ((mask.any() if mask is not None else True) and vol.max() > 0 > vol.min()):
-        raise ValueError("the field has no surface inside its bounds at this voxel size")
-    verts, faces, _, _ = marching_cubes(vol, level=0.0, spacing=(voxel,) * 3, mask=mask)
-    verts = (verts + lo).astype(np.float32)
-    if not normals:
-        return TriangleMesh(verts, faces.astype(np.uint32), np.zeros((0, 3), dtype=np.float32))
-    return oriented_mesh(node, verts, faces, voxel)
+    # edge would be a surface crossing, whose end points are both in the band. A
+    # window column without band voxels lies in one gap run: one evaluation.
+    starts, ijk = K.fill_gaps(vol, mask, win, off, np.float32(voxel))
+    if len(starts):
+        sign = np.where(values(ijk) > 0, np.float32(voxel), np.float32(-voxel))
+        sz = win[np.searchsorted(off, starts, side="right") - 1, 5]
+        for s, z, v in zip(starts.tolist(), sz.tolist(), sign.tolist()):
+            vol[s:s + z] = v
+    stats.runs = len(starts)
+    return Band(win, off, vol, mask, shape, lo)
 
 
 def polygonize_banded(node: Node, voxel: float | None = None, progress=None,
                       stats: BandStats | None = None, normals: bool = True) -> TriangleMesh:
     """Marching-cubes mesh of ``f = 0`` sampled only in the surface band.
+
+    Marching cubes runs on each window's runs of crossing cube layers only
+    (:func:`~.tiled_mc.mesh_runs`), in tile order.
 
     Parameters
     ----------
@@ -515,12 +456,24 @@ def polygonize_banded(node: Node, voxel: float | None = None, progress=None,
         The mesh of :func:`polygonize_dense` on the same grid.
     """
     voxel = float(voxel) if voxel else default_voxel(node)
-    vol, mask, lo = sample_banded(node, voxel, stats, progress)
-    return _mesh(node, vol, lo, voxel, _crossing_cubes(vol), normals)
+    stats = stats if stats is not None else BandStats()
+    band = sample_banded(node, voxel, stats, progress)
+    w, c0, c1 = K.crossing_runs(band.vol, band.win, band.off).T
+    i0, j0, sx, sy, k0, sz = band.win[w].T
+    # Run rows of mesh_runs: windows are in tile order and, within a tile, by
+    # increasing k0; so are their runs.
+    runs = np.stack([band.off[w] + c0, sy * sz, sz, sx, sy, c1 - c0 + 2, i0, j0, k0 + c0,
+                     i0, i0 + sx - 1, j0, j0 + sy - 1], axis=1)
+    stats.meshed = int((sx * sy * (c1 - c0 + 2)).sum())
+    return mesh_runs(node, band.vol, runs, band.shape, band.lo, voxel, normals)
 
 
 def polygonize_dense(node: Node, voxel: float | None = None, normals: bool = True) -> TriangleMesh:
-    """Reference: every vertex of the same grid evaluated, then marching cubes."""
+    """Reference: every vertex of the same grid evaluated, every cube of the grid
+    tested for a crossing, and marching cubes on each tile's runs of crossing layers
+    (:func:`~.tiled_mc.mesh_runs`: the triangles of one marching cubes on the whole
+    grid, in tile order). Built as the banded mesh is, from the whole grid's
+    values: equal signs give the same runs, hence the same mesh bit for bit."""
     voxel = float(voxel) if voxel else default_voxel(node)
     grid = _Grid(node, voxel)
     nx, ny, nz = (int(n) for n in grid.shape)
@@ -531,7 +484,10 @@ def polygonize_dense(node: Node, voxel: float | None = None, normals: bool = Tru
         ii = np.arange(i, min(i + step, nx))
         idx = np.concatenate([np.repeat(ii, len(jk))[:, None], np.tile(jk, (len(ii), 1))], axis=1)
         vol[i:i + len(ii)] = evaluate(node, grid.lo + idx * voxel).reshape(len(ii), ny, nz)
-    return _mesh(node, vol, grid.lo, voxel, normals=normals)
+    i0, j0, sx, sy, c0, c1 = K.tile_crossing_runs(vol, TILE).T
+    runs = np.stack([(i0 * ny + j0) * nz + c0, np.full_like(i0, ny * nz), np.full_like(i0, nz), sx, sy,
+                     c1 - c0 + 2, i0, j0, c0, i0, i0 + sx - 1, j0, j0 + sy - 1], axis=1)
+    return mesh_runs(node, vol.reshape(-1), runs, grid.shape, grid.lo, voxel, normals)
 
 
 def slab_mesh(root: Node, extent, z0: float, z1: float, voxel: float, border: float):

@@ -31,6 +31,12 @@ Field language
                              the same on a sparse coast: 3 x 3 km, 2000 x 2000 columns
                              of 1.5 m voxels, 500 primitives (3-D coverage ~2 %, the
                              paper's sparse case, 6.9x); both meshes without normals.
+                             Both are meshed by column tiles and runs of crossing
+                             layers (:mod:`.tiled_mc`): the dense reference evaluates
+                             every vertex and tests every cube, the banded one works
+                             in the band's windows only (issue 37 item 2), and the
+                             faces are equal bit for bit. The first run pays the
+                             kernels' compilation: use ``--repeat 3``.
                              Baseline: the goal, 7. Extras as above.
 
 Processes
