@@ -114,6 +114,17 @@ def test_session_refines_reloads_moves_and_keeps_the_last_picture_on_a_bad_edit(
         fixed = _next(session, lower.picture, "done")
         assert fixed.error is None
 
+        # The file gone for a moment (an editor saving by rename): one line, the thread lives on.
+        text = path.read_text()
+        path.unlink()
+        session.post("reload")
+        gone = session.wait_for(lambda s: s.error is not None, 60)
+        assert "default.toml" in gone.error and "\n" not in gone.error
+        path.write_text(text.replace("elevation = 12.0", "elevation = 14.0"))
+        session.post("reload")
+        fixed = _next(session, fixed.picture, "done")
+        assert fixed.error is None
+
         # The current view saved as a named camera: the file reads back with it.
         session.post("save_camera", "preview_view")
         saved = session.wait_for(lambda s: "preview_view" in s.cameras, 60)

@@ -291,7 +291,11 @@ class PreviewSession:
             self._wake.wait(0.5)
             self._wake.clear()
             changed_at = time.monotonic()
-            render = self._take_changes()
+            try:
+                render = self._take_changes()
+            except Exception as exc:  # noqa: BLE001 (shown on the page; the session lives on)
+                self._set(error=f"{type(exc).__name__}: {exc}".splitlines()[0])
+                render = False
 
     def _take_changes(self) -> bool:
         """Apply the posted changes; True when the scene must be rendered again."""
@@ -317,7 +321,7 @@ class PreviewSession:
                     look.use_camera(todo["camera"])
                 render = True
             if "reload" in todo:
-                digest = scene_inputs(self.path)
+                digest = scene_inputs(self.path)  # (raises OSError while the file is missing)
                 if digest != self._digest:
                     self._digest = digest
                     for look in (self._small, self._full):
@@ -336,6 +340,10 @@ class PreviewSession:
                           cameras=list(self._full.desc.cameras))
         except (SceneError, KeyError, ValueError) as exc:
             self._set(error=str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
+        except OSError as exc:
+            # The file gone for a moment (an editor that saves by renaming) or unreadable:
+            # say so and keep the picture; the watcher's next event reloads it.
+            self._set(error=f"{exc.filename or self.path}: {exc.strerror or exc}")
         if repaint and not render:
             self._repaint()
         return render
