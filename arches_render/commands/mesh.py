@@ -103,7 +103,8 @@ def run(args) -> int:
     if uv:
         bar = Progress("polygonize", "chunk", args.quiet)
         with voxel_errors(args, desc):
-            pieces = [c.mesh for c in polygonize_chunks(desc.field, voxel, args.chunk_cells or ATLAS_CHUNK_CELLS, bar)]
+            chunks = polygonize_chunks(desc.field, voxel, args.chunk_cells or ATLAS_CHUNK_CELLS, bar)
+        pieces = [c.mesh for c in chunks]
         bar.close()
         bar = Progress("atlas and bake" if args.bake else "atlas", "step", args.quiet)
         bar(0, 2 if args.bake else 1)
