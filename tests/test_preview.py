@@ -76,6 +76,12 @@ def test_session_refines_reloads_moves_and_keeps_the_last_picture_on_a_bad_edit(
         moved = _next(session, done.picture, "done")
         assert moved.compiled == 0
         assert moved.error is None
+        # A turn that would put the camera in the gorge's wall is refused: the view stays.
+        origin = session._full.desc.camera.origin
+        session.post("orbit", (15.0, 0.0))
+        refused = session.wait_for(lambda s: s.error is not None, 60)
+        assert "inside the terrain" in refused.error
+        assert session._full.desc.camera.origin == origin and session.state().picture == moved.picture
 
         # A saved edit of a material value re-renders, without compiling either.
         _, before = session.picture()

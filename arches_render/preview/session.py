@@ -16,7 +16,8 @@ Changes come from the web page or the file watcher, through :meth:`PreviewSessio
 * ``orbit`` / ``dolly``: move the camera around its target (degrees of azimuth and
   elevation) or towards it (a factor of the distance). The moved camera is an
   override on the scene's tables (``camera.origin`` or ``cameras.NAME.origin``), so
-  an edit saved meanwhile keeps the view; choosing a camera drops it.
+  an edit saved meanwhile keeps the view; choosing a camera drops it. A move that
+  would put the camera inside the field's solid is refused with one line.
 * ``save_camera``: write the current view into the scene file as ``[cameras.NAME]``.
 * ``layer``, ``exposure``, ``view``: what the picture shows (the beauty under a view
   transform and exposure, or an AOV layer, :mod:`arches_render.imaging.aov_view`);
@@ -45,6 +46,7 @@ import numpy as np
 
 from .. import tomlfile
 from ..atomic import atomic_write
+from ..field import evaluate
 from ..imaging.aov_view import BEAUTY, DENOISED, layer_to_uint8
 from ..imaging.colour import VIEWS
 from ..imaging.exposure import exposure_of
@@ -356,6 +358,11 @@ class PreviewSession:
         cam = self._full.desc.camera
         origin = orbit(cam.origin, cam.target, cam.up, *turn)
         origin = dolly(origin, cam.target, factor)
+        field = self._full.desc.field
+        if field is not None and evaluate(field, np.asarray([origin]))[0] >= 0.0:
+            # A camera inside rock sees nothing: keep the view and say why.
+            where = ", ".join(f"{v:.1f}" for v in origin)
+            raise ValueError(f"that move puts the camera inside the terrain at [{where}]: the view is kept")
         self._override = {f"{self._camera_key()}.origin": origin}
         for look in (self._small, self._full):
             look.update(self._override)
