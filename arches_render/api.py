@@ -217,7 +217,7 @@ class Lookdev:
         arches_render.scene.SceneError
             For a name the scene does not have (the message lists its cameras).
         """
-        desc = self._parse(copy.deepcopy(self.data), self.path)
+        desc = copy.copy(self.desc)  # (the same tables and field: only the camera changes)
         desc.select_camera(name)
         old, self.desc, self.camera_name = self.desc, desc, name
         self._apply(old, desc)

@@ -28,8 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..field import Node, evaluate
-from .polygonize import BLOCK, PolygonizeError, TriangleMesh, classify_blocks, default_voxel, oriented_mesh
+from ..field import Node
+from .polygonize import PolygonizeError, TriangleMesh, default_voxel, oriented_mesh, sample_blocks
 
 __all__ = ["Chunk", "polygonize_chunks", "chunk_ranges"]
 
@@ -50,29 +50,6 @@ def chunk_ranges(n_points: int, cells: int) -> list[tuple[int, int]]:
         out.append((a, b))
         a = b
     return out
-
-
-def _sample(node: Node, origin, voxel, start, shape):
-    """Samples at grid indices ``start + [0, shape)`` (blocks certified free filled)."""
-    lo_chunk = origin + np.asarray(start) * voxel
-    nblocks = -(-np.asarray(shape) // BLOCK)
-    state = classify_blocks(node, lo_chunk, voxel, nblocks)
-    vol = np.empty(shape, np.float32)
-    local = np.stack(np.meshgrid(*(np.arange(BLOCK),) * 3, indexing="ij"), -1).reshape(-1, 3)
-    todo = []
-    for (bi, bj, bk), s in np.ndenumerate(state):
-        if s:
-            vol[bi * BLOCK:(bi + 1) * BLOCK, bj * BLOCK:(bj + 1) * BLOCK, bk * BLOCK:(bk + 1) * BLOCK] = s * voxel
-        else:
-            todo.append((bi, bj, bk))
-    todo = np.asarray(todo, dtype=np.int64).reshape(-1, 3)
-    per_batch = max(1, (1 << 21) // BLOCK ** 3)
-    for s0 in range(0, len(todo), per_batch):
-        ijk = (todo[s0:s0 + per_batch, None, :] * BLOCK + local[None]).reshape(-1, 3)
-        ijk = ijk[np.all(ijk < shape, axis=1)]
-        # Global indices in the one formula of every chunk: the same point, the same bits.
-        vol[ijk[:, 0], ijk[:, 1], ijk[:, 2]] = evaluate(node, origin + (ijk + start) * voxel)
-    return vol
 
 
 def polygonize_chunks(node: Node, voxel: float | None = None, chunk_cells: int = 128,
@@ -105,7 +82,7 @@ def polygonize_chunks(node: Node, voxel: float | None = None, chunk_cells: int =
     for iy, (y0, y1) in enumerate(ys):
         for ix, (x0, x1) in enumerate(xs):
             start = np.array([x0, y0, 0])
-            vol = _sample(node, origin, voxel, start, (x1 - x0 + 1, y1 - y0 + 1, shape[2]))
+            vol = sample_blocks(node, origin, voxel, start, (x1 - x0 + 1, y1 - y0 + 1, shape[2]))
             done += 1
             if progress:
                 progress(done, len(xs) * len(ys))

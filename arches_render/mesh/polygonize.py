@@ -112,35 +112,66 @@ def sample_grid(node: Node, voxel: float, progress=None):
     if np.prod(shape) > MAX_VOXELS:
         raise PolygonizeError(f"voxel {voxel:g} m gives a {shape.tolist()} grid ({np.prod(shape):.3g} voxels, "
                          f"at most {MAX_VOXELS:.3g}): use a larger voxel")
+    return sample_blocks(node, lo, voxel, (0, 0, 0), shape, progress), lo
+
+
+def sample_blocks(node: Node, origin, voxel: float, start, shape, progress=None) -> np.ndarray:
+    """Field values at grid indices ``start + [0, shape)`` of the grid ``origin + index voxel``.
+
+    Blocks of ``BLOCK``³ samples that :func:`classify_blocks` proves free of
+    surface are filled with ``-voxel`` (air) or ``+voxel`` (matter); the others are
+    evaluated. A sample's position is ``origin + (start + i) voxel`` in float64 rounded
+    to float32, whatever the part of the grid asked: a whole grid and its chunks give
+    the same bits at the same index (:mod:`.chunks`).
+
+    Parameters
+    ----------
+    node : Node
+    origin : array_like
+        Position of grid index ``(0, 0, 0)``.
+    voxel : float
+    start, shape : sequence of 3 ints
+        First index and size of the part sampled.
+    progress : callable, optional
+        ``progress(done, total)`` over the candidate blocks.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``shape`` float32 values.
+    """
+    origin = np.asarray(origin, np.float64)
+    start, shape = np.asarray(start, np.int64), np.asarray(shape, np.int64)
     nblocks = -(-shape // BLOCK)
-    state = classify_blocks(node, lo, voxel, nblocks)
-    vol = np.empty(shape, dtype=np.float32)
+    state = classify_blocks(node, origin + start * voxel, voxel, nblocks)
+    vol = np.empty(tuple(shape), dtype=np.float32)
     for bi, bj, bk in np.argwhere(state != 0):
         vol[bi * BLOCK:(bi + 1) * BLOCK, bj * BLOCK:(bj + 1) * BLOCK,
             bk * BLOCK:(bk + 1) * BLOCK] = state[bi, bj, bk] * voxel
     # Sample the candidate blocks in batches of whole blocks, block by block: points
     # (block, i, j, k) built per axis and values written back as one slab per block
     # (with flat index arrays and a fancy-indexed write, bookkeeping took 3-6 times
-    # as long as evaluating the field). A block's samples past the grid's far faces
-    # are evaluated too and dropped; a kept sample's position is ``lo + index * voxel``
-    # in float64 rounded to float32, whatever the batching (same grid, same bits).
+    # as long as evaluating the field). A block's samples past the far faces are
+    # evaluated too and dropped.
     todo = np.argwhere(state == 0)
     local = np.arange(BLOCK)
     axes = ((slice(None), slice(None), None, None), (slice(None), None, slice(None), None),
             (slice(None), None, None, slice(None)))
     per_batch = max(1, (1 << 21) // BLOCK ** 3)
-    for start in range(0, len(todo), per_batch):
-        blocks = todo[start:start + per_batch]
+    for first in range(0, len(todo), per_batch):
+        blocks = todo[first:first + per_batch]
         pts = np.empty((len(blocks), BLOCK, BLOCK, BLOCK, 3), np.float32)
         for axis, where in enumerate(axes):
-            pts[..., axis] = (lo[axis] + (blocks[:, axis, None] * BLOCK + local) * voxel)[where]
+            index = start[axis] + blocks[:, axis, None] * BLOCK + local
+            pts[..., axis] = (origin[axis] + index * voxel)[where]
         vals = evaluate(node, pts.reshape(-1, 3)).reshape(len(blocks), BLOCK, BLOCK, BLOCK)
         for (bi, bj, bk), v in zip(blocks, vals):
             dst = vol[bi * BLOCK:(bi + 1) * BLOCK, bj * BLOCK:(bj + 1) * BLOCK, bk * BLOCK:(bk + 1) * BLOCK]
             dst[...] = v[:dst.shape[0], :dst.shape[1], :dst.shape[2]]
         if progress:
-            progress(min(start + per_batch, len(todo)), len(todo))
-    return vol, lo
+            progress(min(first + per_batch, len(todo)), len(todo))
+    return vol
+
 
 
 def polygonize(node: Node, voxel: float | None = None, progress=None) -> TriangleMesh:
