@@ -169,3 +169,37 @@ def test_cell_gaps_are_the_box_to_box_distance_to_the_occupied_cells():
     old = np.maximum(distance_transform_edt(~occupied) - np.sqrt(3.0), 0.0)
     assert np.mean(gaps - old) > 0.2 and np.mean(gaps > old + 0.25) > 0.4
     assert np.all(brick_grid.cell_gaps(np.zeros((2, 2, 2), bool)) >= 1e10)
+
+
+def test_unlisted_gaps_bound_the_distance_to_the_boxes_left_out_of_each_list():
+    """``unlisted_gaps`` (how far a skeletal set's level bounds may step past its near
+    lists): per cell, the smallest box-to-box distance to a box *not* on the cell's list
+    of boxes grown by ``margin``, capped at ``reach``: never more (up to its shave, by
+    brute force over every cell and box), and larger than ``margin`` in many cells
+    (else it would buy nothing)."""
+    from arches_render.field.primitive_set import grid_lists, unlisted_gaps
+    rng = np.random.default_rng(3)
+    lo = rng.uniform(0.0, 40.0, (60, 3))
+    hi = lo + rng.uniform(0.5, 6.0, (60, 3))
+    grid_lo, cell = lo.min(axis=0), 3.0
+    res = np.ceil((hi.max(axis=0) - grid_lo) / cell).astype(np.int64)
+    margin, reach = 0.25 * cell, 2.0 * cell
+    start, count, index = grid_lists(lo - margin, hi + margin, grid_lo, cell, res)
+    gaps = unlisted_gaps(lo, hi, grid_lo, cell, res, margin, reach)
+    # Brute force: every cell against every box left out of its list.
+    ix, iy, iz = np.meshgrid(*(np.arange(n) for n in res), indexing="ij")
+    idx = np.stack([ix.ravel(), iy.ravel(), iz.ravel()], 1)
+    cell_id = (idx[:, 2] * res[1] + idx[:, 1]) * res[0] + idx[:, 0]
+    c_lo = grid_lo + idx * cell
+    sep = np.maximum(np.maximum(lo[None] - (c_lo[:, None] + cell), c_lo[:, None] - hi[None]), 0.0)
+    dist = np.sqrt(np.sum(sep * sep, axis=2))
+    listed = np.zeros_like(dist, dtype=bool)
+    for row, cid in enumerate(cell_id):
+        listed[row, index[start[cid]:start[cid] + count[cid]]] = True
+    brute = np.minimum(np.where(listed, np.inf, dist).min(axis=1), reach)
+    got = gaps[cell_id]
+    assert np.all(got <= brute), "a gap overstates the distance to a box left out"
+    # The shave (its docstring): a part in 1e5 and 1e-4 cell edges.
+    assert np.allclose(got, brute * (1 - 1e-5) - 1e-4 * cell, rtol=0, atol=1e-9)
+    assert np.all(got >= margin - 1e-4 * cell - 1e-9)
+    assert np.mean(got > 2 * margin) > 0.3

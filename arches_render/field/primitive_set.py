@@ -86,6 +86,72 @@ def empty_distance(lo_boxes, hi_boxes, grid_lo, cell, res):
     return (cell_gaps(occupied) * cell).ravel()
 
 
+#: Cell entries :func:`unlisted_gaps` enumerates at a time (bounds its memory).
+GAP_CHUNK = 1 << 22
+
+
+def unlisted_gaps(lo_boxes, hi_boxes, grid_lo, cell, res, margin, reach):
+    """Per cell, a lower bound of the distance from any of its points to the boxes *left
+    out* of its list of boxes grown by ``margin`` (:func:`grid_lists`), at most ``reach``.
+
+    A box is left out of a cell's list where, along some axis, the cell's index lies
+    outside the (clipped) range of cells the grown box overlaps: there the box is more
+    than ``margin`` from the cell, so ``margin`` always bounds the gap. The bound is
+    usually much larger: the smallest Euclidean box-to-box distance from the cell to
+    the boxes left out, found over the lists of boxes grown by ``reach`` (a box left
+    out of those is at least ``reach`` away, by the same argument). A tracer that
+    stops its steps at ``margin`` (the nearest unlisted primitive could be there) may
+    then go as far as this gap.
+
+    Parameters
+    ----------
+    lo_boxes, hi_boxes : numpy.ndarray
+        ``(N, 3)`` boxes.
+    grid_lo, cell, res
+        The grid, as for :func:`grid_lists`.
+    margin : float
+        The growth of the boxes of the lists the gaps complement.
+    reach : float
+        Largest gap reported (``>= margin``); cost grows with ``(reach / cell)^3`` a box.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(prod(res),)`` float64 gaps in the cell order of :func:`grid_lists`, a part
+        in 1e5 of the gap and 1e-4 cell edges shaved off (float32 rounding of a
+        point's cell lookup cannot overstate a gap), never below ``margin`` less that.
+    """
+    def ranges(grow):
+        i0 = np.clip(np.floor((lo_boxes - grow - grid_lo) / cell).astype(np.int64), 0, res - 1)
+        i1 = np.clip(np.floor((hi_boxes + grow - grid_lo) / cell).astype(np.int64), 0, res - 1)
+        return i0, i1
+
+    n0, n1 = ranges(margin)
+    r0, r1 = ranges(reach)
+    gaps = np.full(int(np.prod(res)), float(reach))
+    span = r1 - r0 + 1
+    counts = span.prod(axis=1)
+    first = 0
+    while first < len(counts):
+        # Boxes [first, last) enumerate at most GAP_CHUNK cells (at least one box).
+        last = max(first + 1, int(np.searchsorted(np.cumsum(counts[first:]), GAP_CHUNK)) + first)
+        sl = slice(first, last)
+        c = counts[sl]
+        prim = np.repeat(np.arange(first, last), c)
+        local = np.arange(c.sum()) - np.repeat(np.cumsum(c) - c, c)
+        sx, sy = span[prim, 0], span[prim, 1]
+        idx = np.stack([r0[prim, 0] + local % sx, r0[prim, 1] + (local // sx) % sy,
+                        r0[prim, 2] + local // (sx * sy)], axis=1)
+        out = ((idx < n0[prim]) | (idx > n1[prim])).any(axis=1)
+        idx, prim = idx[out], prim[out]
+        cell_lo = grid_lo + idx * cell
+        gap = np.maximum(np.maximum(lo_boxes[prim] - (cell_lo + cell), cell_lo - hi_boxes[prim]), 0.0)
+        cell_id = (idx[:, 2] * res[1] + idx[:, 1]) * res[0] + idx[:, 0]
+        np.minimum.at(gaps, cell_id, np.sqrt(np.sum(gap * gap, axis=1)))
+        first = last
+    return np.maximum(gaps * (1.0 - 1e-5) - 1e-4 * cell, 0.0)
+
+
 class CapsuleSet(Node):
     """Union of capsules ``(a_i, b_i, r_i)`` evaluated through a grid.
 

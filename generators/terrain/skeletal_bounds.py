@@ -21,9 +21,11 @@ the second because within ``r/2`` of ``p``, ``rho`` is 1-Lipschitz and
 ``|grad D| <= L_D = R A L_n / lambda (sigma_s + 2 (c + R) / r)`` (the slope bound
 above with ``r >= r(p) / 2``). It matters in the noise's margin, between the noisy
 surface and its ``D_max`` envelope, where rays graze. The loop runs over *near* lists
-(support boxes grown by ``m``, ``NEAR_REACH`` cell edges), so ``d >= min(m, min_i d_i)``, and at
-least the empty-cell distance; outside the grid, the distance to the box of all
-supports; ``FAR`` above ``value_max``.
+(support boxes grown by ``m``, ``NEAR_REACH`` cell edges), so ``d >= min(G, min_i d_i)``, ``G >= m``
+the cell's gap to the nearest support left out of its near list
+(:func:`~arches_render.field.primitive_set.unlisted_gaps`, up to ``UNLISTED_REACH`` cell
+edges), and at least the empty-cell distance; outside the grid, the distance to the box
+of all supports; ``FAR`` above ``value_max``.
 
 Local slopes (issue 21; :meth:`SkeletalSet.eval_local`). The cell bounds above sum
 ``|e| G_SLOPE L_i`` over every primitive near a cell, about ten times the true
