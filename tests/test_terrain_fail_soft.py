@@ -116,7 +116,7 @@ def test_a_preset_that_makes_nothing_hands_over_to_the_next(tmp_path, capsys, mo
     from arches_render.generators.terrain import presets
     spec = presets.PRESETS["karst"]
     monkeypatch.setitem(presets.PRESETS, "karst", presets.Preset(
-        spec.description, spec.geology, lambda run: run.timer.step("sinks"), spec.steps, spec.camera_elevation))
+        spec.description, spec.geology, lambda run: run.timer.step("sinks"), spec.steps))
     np.save(tmp_path / "alps.npy", alps())
     out = tmp_path / "alps.toml"
     rc, stdout, err = _amplify(capsys, tmp_path / "alps.npy", out, "--cell-size", 200)

@@ -402,15 +402,12 @@ class Preset:
         ``landforms(run)``: adds the preset's primitives to the tree through ``run``.
     steps : callable
         ``steps(run) -> labels`` of the steps ``landforms`` reports, in order.
-    camera_elevation : float
-        Degrees above the horizon of the written scene's camera.
     """
 
     description: str
     geology: Callable
     landforms: Callable
     steps: Callable
-    camera_elevation: float
 
     def resistance(self, run: Amplification) -> Callable:
         """Build the geology as node ``geology`` of the tree; return ``rho(P)`` on numpy points."""
@@ -421,13 +418,13 @@ class Preset:
 
 PRESETS = {
     "sea": Preset("sea cliffs, arches and caves (sea erosion with accessibility)",
-                  sea_geology, sea, sea_steps, camera_elevation=16.0),
+                  sea_geology, sea, sea_steps),
     "river": Preset("canyon with undercut walls (stream-power river erosion)",
-                    river_geology, river, lambda run: ["stream power and sampling"], camera_elevation=32.0),
+                    river_geology, river, lambda run: ["stream power and sampling"]),
     "karst": Preset("cave network (invasion percolation)",
-                    karst_geology, karst, lambda run: ["sinks"], camera_elevation=20.0),
+                    karst_geology, karst, lambda run: ["sinks"]),
     "hoodoos": Preset("hoodoos (open shape grammar)",
-                      hoodoos_geology, hoodoos, lambda run: ["placement probability"], camera_elevation=22.0),
+                      hoodoos_geology, hoodoos, lambda run: ["placement probability"]),
     "strata": Preset("layered cliffs with folds and faults (erosion node)",
-                     strata_geology, strata, lambda run: ["cliff sampling"], camera_elevation=22.0),
+                     strata_geology, strata, lambda run: ["cliff sampling"]),
 }

@@ -21,9 +21,9 @@ Ground and water
     the horizon in the same material, and the sea with it where the sea reaches
     the tile's border; the water surfaces of the tile (:mod:`.water`) are a mesh.
     Tiles of a kilometre or more get an ``[atmosphere]``: distance reads as haze,
-    thinned on tiles wider than :data:`HAZE_RANGE_M` so that the air's meteorological
-    range is the tile's width (default air, turbidity 3, sees about 20 km: a 220 km
-    tile's overview was a fog bank).
+    thinned on tiles wider than a third of :data:`HAZE_RANGE_M` so that the air's
+    meteorological range is :data:`HAZE_WIDTHS` tile widths (default air, turbidity 3,
+    sees about 20 km: a 220 km tile's overview was a fog bank).
 Material
     The ``terrain`` triplanar preset (rock, sand, grass, snow) with its layer
     heights rescaled to the DEM's elevation range, so that a 6 km DEM is not all
@@ -43,13 +43,20 @@ import numpy as np
 
 from arches_render.materials.masks import terrain_look
 
+from .far_field import MirroredRelief
 from .presets import PRESETS
 
 __all__ = ["toml_text", "frame_camera", "landscape_material", "sun_for", "scene_document", "LANDFORM_NAMES"]
 
 #: Meteorological range of the default air (turbidity 3; :mod:`arches_render.render.atmosphere`),
-#: metres: wider tiles get thinner air (``density = HAZE_RANGE_M / width``).
+#: metres: tiles wider than a third of it get thinner air (``density = HAZE_RANGE_M /
+#: (HAZE_WIDTHS width)``).
 HAZE_RANGE_M = 20000.0
+
+#: The air's range in tile widths: the overview looks across the whole tile from near its
+#: edge, low (:func:`frame_camera`). At one width (the aerial overview's rule) a 32 km
+#: tile seen that way was a blue-grey murk; at three its hills read to the far side.
+HAZE_WIDTHS = 3.0
 
 #: Camera names of the close shots, per preset.
 LANDFORM_NAMES = {"sea": "sea_cave", "river": "undercut", "karst": "tunnel", "hoodoos": "hoodoos",
@@ -110,8 +117,9 @@ def toml_text(doc, header=""):
     return "\n".join(out).lstrip("\n") + "\n"
 
 
-def frame_camera(heights, extent, features=None, fov=50.0, elevation=24.0, margin=1.2):
-    """A camera that looks at the features from the downhill side.
+def frame_camera(heights, extent, features=None, fov=50.0, elevation=10.0, margin=0.5, aspect=16 / 9):
+    """A landscape photographer's overview: the features seen from their downhill side, the
+    horizon in the frame.
 
     Parameters
     ----------
@@ -125,9 +133,14 @@ def frame_camera(heights, extent, features=None, fov=50.0, elevation=24.0, margi
     fov : float
         Horizontal field of view, degrees.
     elevation : float
-        Angle of the view above the horizontal, degrees.
+        Angle of the view above the horizontal, degrees: below half the vertical field
+        of view (14.8 degrees at 50 degrees across a 16:9 frame), the horizon is in the
+        frame, with sky above it.
     margin : float
-        Extra distance factor.
+        Distance factor: the camera stands ``margin`` times the distance at which the
+        features' extent fills the frame's width.
+    aspect : float
+        The frame's width over its height.
 
     Returns
     -------
@@ -141,6 +154,12 @@ def frame_camera(heights, extent, features=None, fov=50.0, elevation=24.0, margi
     slope, a Gaussian-smoothed gradient over an eighth of the tile): cliffs,
     cave mouths and canyon walls face downhill, and a canyon is seen along its
     course. On flat ground it stands on the tile's lowest side.
+
+    Low and close, as a photographer stands (issue 34): the default 10 degrees and half
+    the framing distance put the landforms in the foreground and middle distance with
+    the relief receding to a horizon in haze. The aerial view it replaced (16-32 degrees
+    by preset, from 1.2 times the framing distance) showed the tile from above as a
+    model on a table, its edges and the far field around it in view.
     """
     from scipy.ndimage import gaussian_filter
     H = np.asarray(heights, dtype=np.float64)
@@ -176,6 +195,20 @@ def frame_camera(heights, extent, features=None, fov=50.0, elevation=24.0, margi
     i = int(np.clip(round((origin[0] - x0) / dx), 0, nx - 1))
     j = int(np.clip(round((origin[1] - y0) / dy), 0, ny - 1))
     origin[2] = max(origin[2], H[j, i] + 0.1 * (zhi - zlo) + 1.0)
+    # Sky above the relief: camera and target rise together (the pitch kept) until no
+    # ground ahead, the tile's or the far field's (MirroredRelief, unblurred: at least
+    # as high), rises above the line 15 % of the frame's height below its top.
+    vfov2 = math.atan(math.tan(math.radians(fov) / 2) / aspect)
+    top = math.tan(vfov2 - el - 0.3 * vfov2)
+    s = np.linspace(0.02, 3.0, 300)[:, None] * math.hypot(x1 - x0, y1 - y0)
+    turns = np.radians(np.linspace(-0.5 * fov, 0.5 * fov, 5))
+    ahead = az + math.pi + turns  # from the camera towards the target, across the frame
+    qx = origin[0] + s * np.cos(ahead)[None]
+    qy = origin[1] + s * np.sin(ahead)[None]
+    ground = MirroredRelief(H, extent).heights(qx.ravel(), qy.ravel(), 0.0).reshape(qx.shape)
+    rise = max(float(np.max(ground - s * top - origin[2])), 0.0)
+    origin[2] += rise
+    target = target + np.array([0.0, 0.0, rise])
     view = target - origin
     return dict(origin=[float(v) for v in origin], target=[float(v) for v in target], fov=float(fov),
                 azimuth=math.degrees(math.atan2(view[1], view[0])))
@@ -274,7 +307,7 @@ def scene_document(result, name, work_dir, progress=None, close=3):
                         margin=result.terrain.R_np + 2 * stats["cell_size"], progress=progress)
     label = LANDFORM_NAMES[result.preset]
     cameras = {f"{label}_{k + 1}": shot.table() for k, shot in enumerate(shots)}
-    over = frame_camera(H, extent, result.focus, elevation=PRESETS[result.preset].camera_elevation)
+    over = frame_camera(H, extent, result.focus)
     cameras["overview"] = {"origin": over["origin"], "target": over["target"], "fov": over["fov"]}
     first = next(iter(cameras.values()))
     doc = {
@@ -297,7 +330,8 @@ def scene_document(result, name, work_dir, progress=None, close=3):
             far.update(sea_level=float(water.sea_level), water_material="water")
     doc["far_field"] = [far]
     if size >= 1000.0:
-        doc["atmosphere"] = {} if size <= HAZE_RANGE_M else {"density": round(HAZE_RANGE_M / size, 4)}
+        thin = HAZE_RANGE_M / (HAZE_WIDTHS * size)
+        doc["atmosphere"] = {} if thin >= 1.0 else {"density": round(thin, 4)}
     doc["nodes"] = result.tables
     lines = [f"Terrain amplification (Paris et al. 2019): {stats['nodes']} nodes, {stats['primitives']} primitives, "
              f"{stats['memory_bytes'] / 1e6:.2f} MB",
