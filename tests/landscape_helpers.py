@@ -91,7 +91,9 @@ def shot_report(desc, layers, camera, width, height, sky_rows=2, margin=1.0, tol
     dict
         ``top_sky`` (fraction of the top rows with no hit), ``below_horizon_misses``
         (fraction of the below-horizon pixels not fully covered), ``below_horizon_pixels``,
-        ``wall_hits`` (fraction of all pixels whose hit is on a prism wall), ``hits``.
+        ``wall_hits`` (fraction of all pixels whose hit is on a prism wall), ``hits``,
+        ``tile_share`` (fraction of the ground pixels whose hit lies over the field's box,
+        not the far field around it).
     """
     cov = layers["coverage"][0].sum(axis=-1)
     _, zmax, _ = pixel_rays(camera, width, height)
@@ -115,5 +117,8 @@ def shot_report(desc, layers, camera, width, height, sky_rows=2, margin=1.0, tol
                 facing = sign * N[..., axis] > 0.8
                 on |= near & facing & (fcov > 0.5)
         walls = float(on.mean())
+        ground = cov > 0.5  # the field's and the meshes' (the far field is a mesh)
+        over = ((P[..., 0] >= lo[0]) & (P[..., 0] <= hi[0]) & (P[..., 1] >= lo[1]) & (P[..., 1] <= hi[1]))
+        out["tile_share"] = float((over & ground).sum() / max(ground.sum(), 1))
     out["wall_hits"] = walls
     return out
