@@ -133,9 +133,9 @@ def frame_camera(heights, extent, features=None, fov=50.0, elevation=10.0, margi
     fov : float
         Horizontal field of view, degrees.
     elevation : float
-        Angle of the view above the horizontal, degrees: below half the vertical field
-        of view (14.8 degrees at 50 degrees across a 16:9 frame), the horizon is in the
-        frame, with sky above it.
+        How far the camera looks down at the target (it stands this many degrees above
+        it): below half the vertical field of view (14.7 degrees at 50 degrees across a
+        16:9 frame), the horizon is in the frame, with sky above it.
     margin : float
         Distance factor: the camera stands ``margin`` times the distance at which the
         features' extent fills the frame's width.
