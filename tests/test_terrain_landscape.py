@@ -202,3 +202,27 @@ def test_lakes_at_spill_level_and_no_flooded_canyon_floor():
     # The flat floor of the real canyon has resampling pits of 1-4 m: no lake there.
     canyon = np.load(REPO / "scenes" / "data" / "real_nm_canyon_10m.npy", allow_pickle=False)
     assert find_water(canyon, 0.0).lakes == []
+
+
+def test_legibility_rejects_a_slope_that_fills_the_frame_and_keeps_a_landscape():
+    """``shots.legibility`` on two ray grids: a plane seen square on (one sheet, no sky,
+    little depth) is not legible; a view over receding ground with a block in front and
+    sky above is."""
+    from arches_render.generators.terrain.shots import legibility
+    h, w = 18, 32
+    v = np.linspace(0.4, -0.4, h)[:, None] * np.ones((1, w))
+    u = np.ones((h, 1)) * np.linspace(-0.5, 0.5, w)[None]
+    D = np.stack([np.ones((h, w)), u, v], axis=-1)
+    D /= np.linalg.norm(D, axis=-1, keepdims=True)
+    # A wall 20 m ahead across the whole frame.
+    wall_t = 20.0 / D[..., 0]
+    # Ground 10 m below the camera, a block 30 m ahead in the middle columns, sky above.
+    down = D[..., 2] < -1e-3
+    ground_t = np.where(down, 10.0 / np.maximum(-D[..., 2], 1e-9), np.inf)
+    block = (np.abs(u) < 0.15) & (v > -0.2) & (v < 0.1)
+    view_t = np.where(block, 30.0 / D[..., 0], ground_t)
+    t = np.stack([wall_t, view_t])
+    hit = np.isfinite(t)
+    out = legibility(np.stack([D, D]), np.where(hit, t, np.inf), hit)
+    assert not out["legible"][0] and out["one_surface"][0] > 0.9 and out["sky"][0] == 0.0
+    assert out["legible"][1], {k: v[1] for k, v in out.items()}

@@ -31,7 +31,14 @@ Views
     the fraction of the top two rows that escape upwards, its *block* the fraction
     of rays stopped within a fifth of the distance to the landform. Score:
     ``min(cover, 0.45) - max(cover - 0.65, 0)`` times ``(0.5 + 0.5 sky)``, minus
-    ``block / 2``; views without sky in the top rows are dropped.
+    ``block / 2``; views without sky in the top rows are dropped, and so are views
+    that are not *legible* (issue 34, :func:`legibility`): less than 8 % sky in the
+    frame, a depth ratio (90th over 10th percentile of the hit distances) below 2, or
+    more than 40 % of the frame on one smooth sheet of ground (a slope seen square on).
+    On the NM canyon DEM this replaced a sand slope filling 70 % of the frame (one
+    sheet 57 %) by an undercut outcrop with a stratified mesa behind it, and a camera
+    at 1.7 m against a slope (41 %) by one at 6 m that shows the slope's notches, the
+    mesa and the sky.
 Choice
     The close shots are the best view of each landform in the order of
     ``3-D volume x cover``, then further views of the best landforms (azimuths at
@@ -57,6 +64,13 @@ _RAYS = (32, 18)
 _HEIGHTS = (1.7, 6.0, 20.0, 60.0, 150.0)
 _SPANS = (1.5, 3.0, 6.0, 12.0)
 _AZIMUTHS = 16
+
+#: Neighbouring rays whose hit distances differ by at most this fraction of the larger lie
+#: on one sheet (:func:`legibility`).
+SHEET_STEP = 0.08
+#: A legible view: at least this share of sky, this depth ratio, and at most this share of
+#: the frame on one sheet (:func:`legibility`).
+LEGIBLE = {"sky": 0.08, "depth": 2.0, "one_surface": 0.4}
 
 
 class Shot(dict):
@@ -197,7 +211,58 @@ def _score(scene, plain, origins, targets, fov, aspect, voxel, dist):
     sky = ((~hit[:, :2]) & (D[:, :2, :, 2] > 0)).reshape(n, -1).mean(axis=1)
     near = (np.isfinite(t) & (t < np.repeat(0.2 * np.asarray(dist, float), h * w))).reshape(n, -1).mean(axis=1)
     score = (np.minimum(cover, 0.45) - np.maximum(cover - 0.65, 0.0)) * (0.5 + 0.5 * sky) - 0.5 * near
-    return score, cover, sky
+    measures = legibility(D.reshape(n, h, w, 3), t.reshape(n, h, w), hit)
+    return score, cover, sky, measures
+
+
+def legibility(D, t, hit):
+    """Legibility of views from their ray grids (issue 34): per view,
+
+    * ``sky``: the share of the frame whose rays escape upwards;
+    * ``depth``: the 90th over the 10th percentile of the hit distances (a frame with
+      foreground, subject and distance spans several times; a slope seen square on, little);
+    * ``one_surface``: the share of the frame on the largest *smooth sheet*, rays joined to
+      their four neighbours where both hit within ``SHEET_STEP`` of each other's distance (a
+      slope that fills the frame is one sheet; silhouettes, the subject against its
+      background and receding ground break sheets).
+
+    Parameters
+    ----------
+    D : numpy.ndarray
+        ``(n, h, w, 3)`` unit ray directions of ``n`` views.
+    t : numpy.ndarray
+        ``(n, h, w)`` hit distances.
+    hit : numpy.ndarray
+        ``(n, h, w)`` whether each ray hit.
+
+    Returns
+    -------
+    dict of numpy.ndarray
+        ``sky``, ``depth``, ``one_surface`` (each ``(n,)``) and ``legible``, whether a view
+        passes all three (:data:`LEGIBLE`).
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    n, h, w = t.shape
+    sky = ((~hit) & (D[..., 2] > 0)).reshape(n, -1).mean(axis=1)
+    depth, sheet = np.ones(n), np.zeros(n)
+    idx = np.arange(h * w).reshape(h, w)
+    pairs = [(idx[:, :-1], idx[:, 1:]), (idx[:-1], idx[1:])]
+    for i in range(n):
+        ti, hi = t[i].ravel(), hit[i].ravel()
+        if hi.sum() >= 8:
+            lo_q, hi_q = np.percentile(ti[hi], [10, 90])
+            depth[i] = hi_q / max(lo_q, 1e-9)
+        a = np.concatenate([p[0].ravel() for p in pairs])
+        b = np.concatenate([p[1].ravel() for p in pairs])
+        with np.errstate(invalid="ignore"):
+            join = hi[a] & hi[b] & (np.abs(ti[a] - ti[b]) <= SHEET_STEP * np.maximum(ti[a], ti[b]))
+        graph = coo_matrix((np.ones(int(join.sum())), (a[join], b[join])), shape=(h * w, h * w))
+        _, label = connected_components(graph, directed=False)
+        label = label[hi]
+        sheet[i] = np.bincount(label).max() / (h * w) if len(label) else 0.0
+    legible = (sky >= LEGIBLE["sky"]) & (depth >= LEGIBLE["depth"]) & (sheet <= LEGIBLE["one_surface"])
+    return {"sky": sky, "depth": depth, "one_surface": sheet, "legible": legible}
 
 
 def close_shots(root, plain, heights, extent, feature, water_level=None, water_mesh=None, count=3,
@@ -286,11 +351,13 @@ def close_shots(root, plain, heights, extent, feature, water_level=None, water_m
             # Looking down too steeply leaves no horizon in the frame: raise the aim.
             targets[steep, 2] = origins[steep, 2] - math.tan(0.6 * vfov2) * horiz[steep]
             if len(origins):
-                score, cover, sky = _score(scene, plain, origins, targets, fov, aspect, voxel, dist)
-                for k in np.nonzero(sky >= 0.5)[0]:
+                score, cover, sky, legible = _score(scene, plain, origins, targets, fov, aspect, voxel, dist)
+                for k in np.nonzero((sky >= 0.5) & legible["legible"])[0]:
                     best.append(Shot(origin=origins[k], target=targets[k], fov=fov, cover=float(cover[k]),
                                      sky=float(sky[k]), volume_m3=volume, height_m=float(origins[k, 2] - ground[k]),
-                                     score=float(score[k]), azimuth=float(az[k]), landform=len(views)))
+                                     score=float(score[k]), azimuth=float(az[k]), landform=len(views),
+                                     **{f"legible_{m}": (bool(v[k]) if m == "legible" else float(v[k]))
+                                        for m, v in legible.items()}))
         best.sort(key=lambda s: -s["score"])
         views.append(best)
     order = sorted(range(len(views)), key=lambda i: -(views[i][0]["volume_m3"] * views[i][0]["cover"])
