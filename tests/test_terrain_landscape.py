@@ -226,3 +226,29 @@ def test_legibility_rejects_a_slope_that_fills_the_frame_and_keeps_a_landscape()
     out = legibility(np.stack([D, D]), np.where(hit, t, np.inf), hit)
     assert not out["legible"][0] and out["one_surface"][0] > 0.9 and out["sky"][0] == 0.0
     assert out["legible"][1], {k: v[1] for k, v in out.items()}
+
+
+def _escarpment(n=64):
+    """A plateau 900 m above its lowland behind a winding escarpment (200 m cells: coarse)."""
+    x = np.linspace(-1, 1, n)
+    X, Y = np.meshgrid(x, x)
+    return (300 + 900 / (1 + np.exp(-(Y - 0.2 * np.sin(3 * X)) * 12))
+            + 30 * np.sin(5 * X) * np.cos(4 * Y)).astype(np.float32)
+
+
+def test_escarpment_at_coarse_cells_gets_legible_close_shots(tmp_path, capsys):
+    """An escarpment plateau at 200 m cells: four cameras, and the header's legibility of
+    every close shot (sky share, depth ratio, one-sheet share) within shots.LEGIBLE."""
+    import re
+    from arches_render.generators.terrain.shots import LEGIBLE
+    np.save(tmp_path / "esc.npy", _escarpment())
+    out = tmp_path / "esc.toml"
+    rc, stdout, err = _amplify(capsys, tmp_path / "esc.npy", "-o", out, "--cell-size", "200", "--seed", "3")
+    assert rc == 0, err
+    cams = next(line for line in _header(out) if line.startswith("Cameras: "))
+    found = re.findall(r"legible: sky (\d+) %, depth ([\d.]+)x, one sheet (\d+) %", cams)
+    assert len(found) >= 3 and cams.rstrip().endswith("overview"), cams
+    for sky, depth, sheet in found:
+        # (the header rounds: a percent and a tenth)
+        assert float(sky) >= 100 * LEGIBLE["sky"] - 0.5 and float(depth) >= LEGIBLE["depth"] - 0.05, cams
+        assert float(sheet) <= 100 * LEGIBLE["one_surface"] + 0.5, cams
