@@ -120,54 +120,99 @@ def damping_field(labels, g0, V: int, n_labels: int, pairs, points, a: float, b:
     return out
 
 
+#: Flat-index offsets are built for the 27 voxels of a 3 x 3 x 3 block in this order
+#: (di, dj, dk in -1..1, dk fastest), the order the exposure is summed in.
+_CENTRE = 13
+
+
 @numba.njit(parallel=True, cache=True, nogil=True)
-def _erode_kernel(labels, cells, omega, rate, steps, periodic, rho):
+def _neighbourhoods(labels, cells, periodic):
+    """Static neighbourhood of every eroding voxel: which of its 27 neighbours share its label.
+
+    Labels never change during erosion, so the label comparisons of every step
+    are done once here. Returns ``same`` (bit ``t`` set: neighbour ``t`` lies
+    in the grid, after wrapping if ``periodic``, and has the voxel's label) and
+    ``row``: ``-1`` for voxels whose neighbours are ``flat + delta[t]``, else
+    the row of ``nbr`` that lists their (wrapped) flat neighbour indices; only
+    voxels on the grid's border need a row.
+    """
     nx, ny, nz = labels.shape
-    nxt = np.empty(cells.shape[0], dtype=rho.dtype)
+    n = cells.shape[0]
+    same = np.zeros(n, dtype=np.int64)
+    row = np.full(n, -1, dtype=np.int64)
+    rows = 0
+    for q in range(n):
+        i, j, k = cells[q, 0], cells[q, 1], cells[q, 2]
+        if not (0 < i < nx - 1 and 0 < j < ny - 1 and 0 < k < nz - 1):
+            row[q] = rows
+            rows += 1
+    nbr = np.full((rows, 27), -1, dtype=np.int64)
+    for q in numba.prange(n):
+        i, j, k = cells[q, 0], cells[q, 1], cells[q, 2]
+        l = labels[i, j, k]
+        m = 0
+        t = 0
+        for di in range(-1, 2):
+            for dj in range(-1, 2):
+                for dk in range(-1, 2):
+                    a, b, c = i + di, j + dj, k + dk
+                    if periodic:
+                        a, b, c = a % nx, b % ny, c % nz
+                    if 0 <= a < nx and 0 <= b < ny and 0 <= c < nz:
+                        if labels[a, b, c] == l:
+                            m |= 1 << t
+                        if row[q] >= 0:
+                            nbr[row[q], t] = (a * ny + b) * nz + c
+                    t += 1
+        same[q] = m
+    return same, row, nbr
+
+
+@numba.njit(parallel=True, cache=True, nogil=True)
+def _erode_kernel(flat, same, row, nbr, delta, faces, omega, rate, steps, rho):
+    """``steps`` synchronous erosion iterations of the voxels ``flat`` of the flat grid ``rho``.
+
+    A voxel is at the surface when one of its 6 face neighbours is outside the
+    grid, of another rock, or empty; then it loses ``rate * exposure * omega``
+    with the exposure summed over its 27-block in the fixed order of ``delta``
+    (the voxel's own term added then taken off), so the result is the same bits
+    whatever the grid's shape or the voxel's place in it.
+    """
+    n = flat.shape[0]
+    nxt = np.empty(n, dtype=rho.dtype)
+    all_faces = 0
+    for t in faces:
+        all_faces |= 1 << t
     for _ in range(steps):
-        for q in numba.prange(cells.shape[0]):
-            i, j, k = cells[q, 0], cells[q, 1], cells[q, 2]
-            l = labels[i, j, k]
-            r0 = rho[i, j, k]
+        for q in numba.prange(n):
+            p = flat[q]
+            r0 = rho[p]
             nxt[q] = r0
             if r0 <= 0.0:
                 continue
-            surface = False
-            for axis in range(3):
-                for sgn in (-1, 1):
-                    a, b, c = i, j, k
-                    if axis == 0:
-                        a += sgn
-                    elif axis == 1:
-                        b += sgn
-                    else:
-                        c += sgn
-                    if periodic:
-                        a, b, c = a % nx, b % ny, c % nz
-                    if not (0 <= a < nx and 0 <= b < ny and 0 <= c < nz) or labels[a, b, c] != l \
-                            or rho[a, b, c] <= 0.0:
+            m = same[q]
+            r = row[q]
+            surface = (m & all_faces) != all_faces
+            if not surface:
+                for t in faces:
+                    if rho[p + delta[t] if r < 0 else nbr[r, t]] <= 0.0:
                         surface = True
+                        break
             if not surface:
                 continue
             expo = 0.0
-            for di in range(-1, 2):
-                for dj in range(-1, 2):
-                    for dk in range(-1, 2):
-                        a, b, c = i + di, j + dj, k + dk
-                        if periodic:
-                            a, b, c = a % nx, b % ny, c % nz
-                        s = 0.0
-                        if 0 <= a < nx and 0 <= b < ny and 0 <= c < nz and labels[a, b, c] == l:
-                            s = rho[a, b, c]
-                        expo += 1.0 - s
+            for t in range(27):
+                s = 0.0
+                if (m >> t) & 1:
+                    s = rho[p + delta[t] if r < 0 else nbr[r, t]]
+                expo += 1.0 - s
             # The loop counted the voxel itself (1 - rho); the exposure is over its 26 neighbours.
             expo -= 1.0 - r0
-            nxt[q] = max(0.0, r0 - rate * (expo / 26.0) * omega[i, j, k])
+            nxt[q] = max(0.0, r0 - rate * (expo / 26.0) * omega[q])
         # A serial copy: numba would fuse two parallel loops over the same range, letting
         # this write race with the reads above (a nondeterministic result).
-        for q in range(cells.shape[0]):
-            rho[cells[q, 0], cells[q, 1], cells[q, 2]] = nxt[q]
-    return rho
+        for q in range(n):
+            rho[flat[q]] = nxt[q]
 
 
 def erode(labels, own, omega, steps: int, rate: float, periodic: bool = False) -> np.ndarray:
@@ -194,9 +239,20 @@ def erode(labels, own, omega, steps: int, rate: float, periodic: bool = False) -
         Erosion state ``rho`` in ``[0, 1]`` (0: empty); 0 outside the own rocks.
     """
     own = np.asarray(own, dtype=np.bool_)
+    labels = np.ascontiguousarray(labels)
+    omega = np.asarray(omega, np.float64)
     rho = np.zeros(labels.shape, dtype=np.float64)
     inside = labels >= 0
     rho[inside] = own[labels[inside]]
-    cells = np.argwhere(rho > 0).astype(np.int64)
-    _erode_kernel(labels, cells, np.asarray(omega, np.float64), float(rate), int(steps), bool(periodic), rho)
+    # Voxels with omega = 0 (at a contact) never change: rho - rate * e * 0 = rho.
+    cells = np.argwhere((rho > 0) & (omega > 0)).astype(np.int64)
+    nx, ny, nz = labels.shape
+    d = np.array([-1, 0, 1], dtype=np.int64)
+    delta = ((d[:, None, None] * ny + d[None, :, None]) * nz + d[None, None, :]).ravel()
+    faces = np.array([_CENTRE - 9, _CENTRE - 3, _CENTRE - 1, _CENTRE + 1, _CENTRE + 3, _CENTRE + 9],
+                     dtype=np.int64)
+    same, row, nbr = _neighbourhoods(labels, cells, bool(periodic))
+    flat = (cells[:, 0] * ny + cells[:, 1]) * nz + cells[:, 2]
+    _erode_kernel(flat, same, row, nbr, delta, faces, omega[tuple(cells.T)], float(rate), int(steps),
+                  rho.reshape(-1))
     return rho.astype(np.float32)
