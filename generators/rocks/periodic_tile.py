@@ -26,7 +26,7 @@ import numpy as np
 from .anisotropic_voronoi import periodic_voronoi_labels
 from .contact_points import random_face_contacts
 from .damped_erosion import GAUSSIAN, damping_field, erode
-from .rock_meshes import blur_field, field_padding, mesh_rock
+from .rock_meshes import anchor_voxels, blur_field, field_padding, mesh_rock
 from .rock_store import RockStore
 from .seed_points import hash_keys
 from .tile_params import TileParams
@@ -124,9 +124,7 @@ def build_periodic_tile(params: TileParams, progress=None) -> RockStore:
         if mesh is None:
             continue
         verts, faces, normals = mesh
-        inside = np.argwhere(field > 0.5)
-        pick = inside[np.linspace(0, len(inside) - 1, params.anchors).round().astype(np.int64)]
-        anchors = (pick + lo + 0.5) / N * P
+        anchors = (anchor_voxels(field, params.anchors) + lo + 0.5) / N * P
         p = pts[k] * P
         v = verts.astype(np.float64) * P
         rocks.append(dict(vertices=v.astype(np.float32), faces=faces, normals=normals, seed=p,
