@@ -21,8 +21,11 @@ distances, hence the same label, in every region grid that contains it; ties
 are broken by the seeds' context-free ids. Assembled tiles therefore partition
 space with no gap or duplicate.
 
-The kernels are numba loops over the grid (parallel over slabs); they are the
-hot spot of tile generation.
+The kernels are numba loops over the grid. The aperiodic one works in blocks
+of ``V^3`` voxels that share their candidate cells (parallel over blocks): the
+distance terms that depend on one axis are formed once per block and seed,
+with the same operations in the same order as the per-voxel expression, so
+the labels are the same bits as a voxel-by-voxel evaluation.
 """
 
 from __future__ import annotations
@@ -60,37 +63,77 @@ class CellIndex:
         self.start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _offset(v, V, s, scell, soff, a):
+    """Axis ``a`` of voxel ``v``'s centre minus seed ``s``, in cells: exact in the voxel and cell integers."""
+    return (float(v - V * scell[s, a]) + 0.5) / V - soff[s, a]
+
+
 @numba.njit(parallel=True, cache=True, nogil=True)
 def _labels_kernel(g0, shape, V, clo, cshape, start, scell, soff, smet, suid, out):
+    # A voxel's candidates are the 2 x 2 x 2 cells from (v + V/2) // V - 1 on: the same for
+    # a block of V voxels per axis. Per block and candidate, the terms of the distance that
+    # depend on one axis only are computed once (V per axis, not V^3).
     half = V // 2
-    for i in numba.prange(shape[0]):
-        vx = g0[0] + i
-        cx0 = (vx + half) // V - 1 - clo[0]
-        for j in range(shape[1]):
-            vy = g0[1] + j
-            cy0 = (vy + half) // V - 1 - clo[1]
-            for k in range(shape[2]):
-                vz = g0[2] + k
-                cz0 = (vz + half) // V - 1 - clo[2]
-                best = np.inf
-                bl = -1
-                bu = np.uint64(0)
-                for cx in range(max(cx0, 0), min(cx0 + 2, cshape[0])):
-                    for cy in range(max(cy0, 0), min(cy0 + 2, cshape[1])):
-                        for cz in range(max(cz0, 0), min(cz0 + 2, cshape[2])):
-                            c = (cx * cshape[1] + cy) * cshape[2] + cz
-                            for s in range(start[c], start[c + 1]):
-                                dx = (float(vx - V * scell[s, 0]) + 0.5) / V - soff[s, 0]
-                                dy = (float(vy - V * scell[s, 1]) + 0.5) / V - soff[s, 1]
-                                dz = (float(vz - V * scell[s, 2]) + 0.5) / V - soff[s, 2]
-                                d = (smet[s, 0] * dx * dx + smet[s, 1] * dy * dy + smet[s, 2] * dz * dz
-                                     + 2.0 * (smet[s, 3] * dx * dy + smet[s, 4] * dx * dz
-                                              + smet[s, 5] * dy * dz))
-                                if d < best or (d == best and suid[s] < bu):
-                                    best = d
-                                    bl = s
-                                    bu = suid[s]
-                out[i, j, k] = bl
+    b0 = (g0 + half) // V
+    nb = (g0 + shape - 1 + half) // V - b0 + 1
+    for blk in numba.prange(nb[0] * nb[1] * nb[2]):
+        b = np.array([blk // (nb[1] * nb[2]), (blk // nb[2]) % nb[1], blk % nb[2]]) + b0
+        lo = np.maximum(b * V - half - g0, 0)
+        hi = np.minimum((b + 1) * V - half - g0, shape)
+        c0 = b - 1 - clo
+        c1 = np.minimum(c0 + 2, cshape)
+        c0 = np.maximum(c0, 0)
+        cand = []
+        for cx in range(c0[0], c1[0]):
+            for cy in range(c0[1], c1[1]):
+                for cz in range(c0[2], c1[2]):
+                    c = (cx * cshape[1] + cy) * cshape[2] + cz
+                    for s in range(start[c], start[c + 1]):
+                        cand.append(s)
+        nc = len(cand)
+        nx, ny, nz = hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]
+        dxx = np.empty((nc, nx))
+        mxy = np.empty((nc, nx))
+        mxz = np.empty((nc, nx))
+        dy = np.empty((nc, ny))
+        dyy = np.empty((nc, ny))
+        myz = np.empty((nc, ny))
+        dz = np.empty((nc, nz))
+        dzz = np.empty((nc, nz))
+        for q in range(nc):
+            s = cand[q]
+            for t in range(nx):
+                x = _offset(g0[0] + lo[0] + t, V, s, scell, soff, 0)
+                dxx[q, t] = smet[s, 0] * x * x
+                mxy[q, t] = smet[s, 3] * x
+                mxz[q, t] = smet[s, 4] * x
+            for t in range(ny):
+                y = _offset(g0[1] + lo[1] + t, V, s, scell, soff, 1)
+                dy[q, t] = y
+                dyy[q, t] = smet[s, 1] * y * y
+                myz[q, t] = smet[s, 5] * y
+            for t in range(nz):
+                z = _offset(g0[2] + lo[2] + t, V, s, scell, soff, 2)
+                dz[q, t] = z
+                dzz[q, t] = smet[s, 2] * z * z
+        for i in range(nx):
+            for j in range(ny):
+                for k in range(nz):
+                    best = np.inf
+                    bl = -1
+                    bu = np.uint64(0)
+                    for q in range(nc):
+                        # The expression of the reference distance, term by term:
+                        # M_xx dx dx + M_yy dy dy + M_zz dz dz + 2 (M_xy dx dy + M_xz dx dz + M_yz dy dz).
+                        d = (dxx[q, i] + dyy[q, j] + dzz[q, k]
+                             + 2.0 * (mxy[q, i] * dy[q, j] + mxz[q, i] * dz[q, k] + myz[q, j] * dz[q, k]))
+                        s = cand[q]
+                        if d < best or (d == best and suid[s] < bu):
+                            best = d
+                            bl = s
+                            bu = suid[s]
+                    out[lo[0] + i, lo[1] + j, lo[2] + k] = bl
 
 
 def voronoi_labels(index: CellIndex, g0, shape, V: int) -> np.ndarray:
