@@ -15,6 +15,7 @@ Two volumes touch when two of their voxels share a face.
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 from .seed_points import Seeds, anisotropic_distance, hash_uniform
@@ -40,6 +41,45 @@ def _face_pairs(labels: np.ndarray, periodic: bool):
     return [np.concatenate(x) for x in zip(*out)]
 
 
+@numba.njit(cache=True, nogil=True)
+def _adjacent_keys(labels, periodic, m):
+    """Keys ``min * m + max`` of face-adjacent voxels with different labels (both >= 0).
+
+    Repeats of the last key are skipped (runs along a shared face give the same
+    pair again and again); the caller takes the unique keys.
+    """
+    nx, ny, nz = labels.shape
+    out = np.empty(3 * labels.size, dtype=np.int64)
+    n = 0
+    last = -1
+    for i in range(nx):
+        for j in range(ny):
+            for k in range(nz):
+                a = labels[i, j, k]
+                if a < 0:
+                    continue
+                for axis in range(3):
+                    p, q, r = i, j, k
+                    if axis == 0:
+                        p += 1
+                    elif axis == 1:
+                        q += 1
+                    else:
+                        r += 1
+                    if periodic:
+                        p, q, r = p % nx, q % ny, r % nz
+                    elif p == nx or q == ny or r == nz:
+                        continue
+                    b = labels[p, q, r]
+                    if b >= 0 and b != a:
+                        key = np.int64(min(a, b)) * m + max(a, b)
+                        if key != last:
+                            out[n] = key
+                            n += 1
+                            last = key
+    return out[:n]
+
+
 def adjacent_label_pairs(labels: np.ndarray, periodic: bool = False) -> np.ndarray:
     """Unordered pairs of labels with face-adjacent voxels.
 
@@ -55,9 +95,8 @@ def adjacent_label_pairs(labels: np.ndarray, periodic: bool = False) -> np.ndarr
     (P, 2) int64
         Unique pairs ``(i, j)`` with ``i < j``.
     """
-    a, b, _, _ = _face_pairs(labels, periodic)
     m = int(labels.max()) + 1
-    key = np.unique(np.minimum(a, b).astype(np.int64) * m + np.maximum(a, b))
+    key = np.unique(_adjacent_keys(np.ascontiguousarray(labels), bool(periodic), m))
     return np.stack([key // m, key % m], axis=1)
 
 
