@@ -125,16 +125,49 @@ def damping_field(labels, g0, V: int, n_labels: int, pairs, points, a: float, b:
 _CENTRE = 13
 
 
+@numba.njit(cache=True, nogil=True)
+def _eroding_voxels(labels, own, omega):
+    """Initial ``rho`` (1 on the own rocks, 0 elsewhere) and the voxels that erosion can change.
+
+    Those are the own voxels with ``omega > 0``: at ``omega = 0`` (a contact)
+    ``rho - rate * e * 0 = rho``. Returns ``rho`` and the voxels in C order as
+    ``(i, j, k)``, flat indices and their ``omega``.
+    """
+    lf = labels.ravel()
+    of = omega.ravel()
+    rho = np.zeros(labels.shape)
+    rf = rho.ravel()
+    n = 0
+    for p in range(lf.shape[0]):
+        if lf[p] >= 0 and own[lf[p]]:
+            rf[p] = 1.0
+            if of[p] > 0.0:
+                n += 1
+    cells = np.empty((n, 3), dtype=np.int64)
+    flat = np.empty(n, dtype=np.int64)
+    w = np.empty(n)
+    _, ny, nz = labels.shape
+    q = 0
+    for p in range(lf.shape[0]):
+        if rf[p] > 0.0 and of[p] > 0.0:
+            cells[q, 0], cells[q, 1], cells[q, 2] = p // (ny * nz), (p // nz) % ny, p % nz
+            flat[q] = p
+            w[q] = of[p]
+            q += 1
+    return rho, cells, flat, w
+
+
 @numba.njit(parallel=True, cache=True, nogil=True)
-def _neighbourhoods(labels, cells, periodic):
+def _neighbourhoods(labels, cells, delta, periodic):
     """Static neighbourhood of every eroding voxel: which of its 27 neighbours share its label.
 
     Labels never change during erosion, so the label comparisons of every step
-    are done once here. Returns ``same`` (bit ``t`` set: neighbour ``t`` lies
-    in the grid, after wrapping if ``periodic``, and has the voxel's label) and
-    ``row``: ``-1`` for voxels whose neighbours are ``flat + delta[t]``, else
-    the row of ``nbr`` that lists their (wrapped) flat neighbour indices; only
-    voxels on the grid's border need a row.
+    are done once here (``delta``: flat offsets of the 27-block). Returns
+    ``same`` (bit ``t`` set: neighbour ``t`` lies in the grid, after wrapping
+    if ``periodic``, and has the voxel's label) and ``row``: ``-1`` for voxels
+    whose neighbours are ``flat + delta[t]``, else the row of ``nbr`` that
+    lists their (wrapped) flat neighbour indices; only voxels on the grid's
+    border need a row.
     """
     nx, ny, nz = labels.shape
     n = cells.shape[0]
@@ -147,10 +180,17 @@ def _neighbourhoods(labels, cells, periodic):
             row[q] = rows
             rows += 1
     nbr = np.full((rows, 27), -1, dtype=np.int64)
+    flat = labels.ravel()
     for q in numba.prange(n):
         i, j, k = cells[q, 0], cells[q, 1], cells[q, 2]
         l = labels[i, j, k]
         m = 0
+        if row[q] < 0:
+            p = (i * ny + j) * nz + k
+            for t in range(27):
+                m |= np.int64(flat[p + delta[t]] == l) << t
+            same[q] = m
+            continue
         t = 0
         for di in range(-1, 2):
             for dj in range(-1, 2):
@@ -201,11 +241,16 @@ def _erode_kernel(flat, same, row, nbr, delta, faces, omega, rate, steps, rho):
             if not surface:
                 continue
             expo = 0.0
-            for t in range(27):
-                s = 0.0
-                if (m >> t) & 1:
-                    s = rho[p + delta[t] if r < 0 else nbr[r, t]]
-                expo += 1.0 - s
+            if r < 0:
+                # Branch free: an unshared neighbour reads rho * 0 = 0 (rho is finite).
+                for t in range(27):
+                    expo += 1.0 - rho[p + delta[t]] * float((m >> t) & 1)
+            else:
+                for t in range(27):
+                    s = 0.0
+                    if (m >> t) & 1:
+                        s = rho[nbr[r, t]]
+                    expo += 1.0 - s
             # The loop counted the voxel itself (1 - rho); the exposure is over its 26 neighbours.
             expo -= 1.0 - r0
             nxt[q] = max(0.0, r0 - rate * (expo / 26.0) * omega[q])
@@ -238,21 +283,14 @@ def erode(labels, own, omega, steps: int, rate: float, periodic: bool = False) -
     (nx, ny, nz) float32
         Erosion state ``rho`` in ``[0, 1]`` (0: empty); 0 outside the own rocks.
     """
-    own = np.asarray(own, dtype=np.bool_)
     labels = np.ascontiguousarray(labels)
-    omega = np.asarray(omega, np.float64)
-    rho = np.zeros(labels.shape, dtype=np.float64)
-    inside = labels >= 0
-    rho[inside] = own[labels[inside]]
-    # Voxels with omega = 0 (at a contact) never change: rho - rate * e * 0 = rho.
-    cells = np.argwhere((rho > 0) & (omega > 0)).astype(np.int64)
+    rho, cells, flat, w = _eroding_voxels(labels, np.asarray(own, dtype=np.bool_),
+                                          np.ascontiguousarray(omega, dtype=np.float64))
     nx, ny, nz = labels.shape
     d = np.array([-1, 0, 1], dtype=np.int64)
     delta = ((d[:, None, None] * ny + d[None, :, None]) * nz + d[None, None, :]).ravel()
     faces = np.array([_CENTRE - 9, _CENTRE - 3, _CENTRE - 1, _CENTRE + 1, _CENTRE + 3, _CENTRE + 9],
                      dtype=np.int64)
-    same, row, nbr = _neighbourhoods(labels, cells, bool(periodic))
-    flat = (cells[:, 0] * ny + cells[:, 1]) * nz + cells[:, 2]
-    _erode_kernel(flat, same, row, nbr, delta, faces, omega[tuple(cells.T)], float(rate), int(steps),
-                  rho.reshape(-1))
+    same, row, nbr = _neighbourhoods(labels, cells, delta, bool(periodic))
+    _erode_kernel(flat, same, row, nbr, delta, faces, w, float(rate), int(steps), rho.reshape(-1))
     return rho.astype(np.float32)
