@@ -70,7 +70,7 @@ class RockStore:
         rocks = sorted(rocks, key=lambda r: (r["slot"], int(r["uid"])))
         nv = np.array([len(r["vertices"]) for r in rocks], dtype=np.int64)
         nf = np.array([len(r["faces"]) for r in rocks], dtype=np.int64)
-        cat = (lambda key, shape, dt: np.concatenate([r[key] for r in rocks]).astype(dt)
+        cat = (lambda key, shape, dt: np.concatenate([r[key] for r in rocks]).astype(dt, copy=False)
                if rocks else np.zeros(shape, dt))
         slot = np.array([r["slot"] for r in rocks], dtype=np.int64)
         return cls(vertices=cat("vertices", (0, 3), np.float32),
