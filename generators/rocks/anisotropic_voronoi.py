@@ -117,23 +117,32 @@ def _labels_kernel(g0, shape, V, clo, cshape, start, scell, soff, smet, suid, ou
                 z = _offset(g0[2] + lo[2] + t, V, s, scell, soff, 2)
                 dz[q, t] = z
                 dzz[q, t] = smet[s, 2] * z * z
+        best = np.empty(nz)
+        bl = np.empty(nz, dtype=np.int64)
+        bu = np.empty(nz, dtype=np.uint64)
         for i in range(nx):
             for j in range(ny):
-                for k in range(nz):
-                    best = np.inf
-                    bl = -1
-                    bu = np.uint64(0)
-                    for q in range(nc):
+                best[:] = np.inf
+                bl[:] = -1
+                bu[:] = 0
+                # Candidates outside, a row of voxels inside: branch-free selects the compiler
+                # vectorises. (d, uid) is a strict order, so the winner does not depend on
+                # the candidates' order.
+                for q in range(nc):
+                    s = cand[q]
+                    u = suid[s]
+                    a = dxx[q, i] + dyy[q, j]
+                    bx = mxy[q, i] * dy[q, j]
+                    for k in range(nz):
                         # The expression of the reference distance, term by term:
                         # M_xx dx dx + M_yy dy dy + M_zz dz dz + 2 (M_xy dx dy + M_xz dx dz + M_yz dy dz).
-                        d = (dxx[q, i] + dyy[q, j] + dzz[q, k]
-                             + 2.0 * (mxy[q, i] * dy[q, j] + mxz[q, i] * dz[q, k] + myz[q, j] * dz[q, k]))
-                        s = cand[q]
-                        if d < best or (d == best and suid[s] < bu):
-                            best = d
-                            bl = s
-                            bu = suid[s]
-                    out[lo[0] + i, lo[1] + j, lo[2] + k] = bl
+                        d = a + dzz[q, k] + 2.0 * (bx + mxz[q, i] * dz[q, k] + myz[q, j] * dz[q, k])
+                        win = d < best[k] or (d == best[k] and u < bu[k])
+                        best[k] = d if win else best[k]
+                        bl[k] = s if win else bl[k]
+                        bu[k] = u if win else bu[k]
+                for k in range(nz):
+                    out[lo[0] + i, lo[1] + j, lo[2] + k] = bl[k]
 
 
 def voronoi_labels(index: CellIndex, g0, shape, V: int) -> np.ndarray:
