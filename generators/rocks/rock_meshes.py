@@ -124,12 +124,50 @@ def anchor_voxels(field: np.ndarray, count: int) -> np.ndarray:
 
 @numba.njit(cache=True, nogil=True)
 def _signed_volume(v, f):
+    # In float64 whatever the vertices' type (float32 from marching cubes).
     s = 0.0
     for i in range(f.shape[0]):
-        a, b, c = v[f[i, 0]], v[f[i, 1]], v[f[i, 2]]
-        s += (a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
-              + a[2] * (b[0] * c[1] - b[1] * c[0]))
+        a0, a1, a2 = np.float64(v[f[i, 0], 0]), np.float64(v[f[i, 0], 1]), np.float64(v[f[i, 0], 2])
+        b0, b1, b2 = np.float64(v[f[i, 1], 0]), np.float64(v[f[i, 1], 1]), np.float64(v[f[i, 1], 2])
+        c0, c1, c2 = np.float64(v[f[i, 2], 0]), np.float64(v[f[i, 2], 1]), np.float64(v[f[i, 2], 2])
+        s += a0 * (b1 * c2 - b2 * c1) - a1 * (b0 * c2 - b2 * c0) + a2 * (b0 * c1 - b1 * c0)
     return s / 6.0
+
+
+@numba.njit(cache=True, nogil=True)
+def _nudged_max(field):
+    """The field's maximum before values exactly at the level 1/2 are moved off it (in place)."""
+    top = -np.inf
+    for p in range(field.size):
+        v = field.flat[p]
+        top = max(top, v)
+        if v == 0.5:
+            field.flat[p] = np.float32(0.5 + 1e-6)
+    return top
+
+
+@numba.njit(cache=True, nogil=True)
+def _outward_cells(verts, faces, origin, V):
+    """Closed-mesh check, outward winding and cell coordinates of a marching-cubes mesh.
+
+    Returns ``(ok, x, f)``: ``ok`` false when the mesh is not closed and
+    oriented or has no volume; ``x`` float32 ``(verts + origin + 0.5) / V``
+    (formed in float64); ``f`` int32 faces, reversed if the volume is negative.
+    """
+    x = np.empty((verts.shape[0], 3), dtype=np.float32)
+    f = np.empty((faces.shape[0], 3), dtype=np.int32)
+    if not _closed_oriented(faces):
+        return False, x, f
+    vol = _signed_volume(verts, faces)
+    if vol == 0.0:
+        return False, x, f
+    for i in range(faces.shape[0]):
+        for e in range(3):
+            f[i, e] = faces[i, 2 - e] if vol < 0 else faces[i, e]
+    for i in range(verts.shape[0]):
+        for a in range(3):
+            x[i, a] = np.float32((np.float64(verts[i, a]) + (origin[a] + 0.5)) / V)
+    return True, x, f
 
 
 def mesh_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
@@ -274,10 +312,9 @@ def mesh_rock(field: np.ndarray, origin, V: int, step: int = 1):
     Peytavie et al. 2009, section 5; Lorensen and Cline 1987; Lewiner et al. 2003.
     """
     from skimage.measure import marching_cubes
-    if field.max() <= 0.5:
-        return None
     # A value exactly at the level makes zero-area triangles; nudge it off.
-    field[field == 0.5] = np.float32(0.5 + 1e-6)
+    if _nudged_max(field) <= 0.5:
+        return None
     verts, faces, normals, _ = marching_cubes(field, 0.5, step_size=step, allow_degenerate=False)
     if len(faces) < 8:
         return None
@@ -285,14 +322,9 @@ def mesh_rock(field: np.ndarray, origin, V: int, step: int = 1):
     # anything else (crumbs cut off by erosion, a handle) gets the component pass.
     if len(verts) - len(faces) // 2 != 2 or len(faces) % 2:
         verts, faces, normals = keep_largest_component(verts, faces, normals)
-    faces = faces.astype(np.int64)
-    if not closed_oriented(faces):
+    # Winding kept outward whatever the library's convention.
+    ok, x, faces = _outward_cells(verts, faces, np.asarray(origin, np.float64), int(V))
+    if not ok:
         return None
-    vol = _signed_volume(verts.astype(np.float64), faces)
-    if vol == 0.0:
-        return None
-    if vol < 0:   # keep the winding outward whatever the library's convention
-        faces = faces[:, ::-1]
-    x = (verts + (np.asarray(origin, np.float64) + 0.5)) / V
     nrm = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
-    return x.astype(np.float32), np.ascontiguousarray(faces, dtype=np.int32), nrm.astype(np.float32)
+    return x, faces, nrm.astype(np.float32)
