@@ -29,7 +29,7 @@ from . import corner_cubes as cc
 from .anisotropic_voronoi import CellIndex, voronoi_labels
 from .contact_points import adjacent_label_pairs, bisect_contacts
 from .damped_erosion import LINEAR, damping_field, erode
-from .rock_meshes import anchor_voxels, field_padding, mesh_rock, rock_field
+from .rock_meshes import anchor_voxels, bounding_radius, field_padding, mesh_rock, rock_field
 from .rock_store import RockStore
 from .seed_points import cell_seeds
 from .tile_params import TileParams
@@ -128,7 +128,7 @@ def _rock_record(field, origin, V, seed_pos, uid, params, slot):
     anchors = (anchor_voxels(field, params.anchors) + np.asarray(origin) + 0.5) / V
     p = np.asarray(seed_pos, dtype=np.float64)
     return dict(vertices=verts, faces=faces, normals=normals, seed=p,
-                radius=float(np.sqrt(((verts - p) ** 2).sum(axis=1).max())),
+                radius=bounding_radius(verts, p),
                 uid=np.uint64(uid), slot=slot, anchors=anchors.astype(np.float32))
 
 

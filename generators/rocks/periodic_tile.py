@@ -26,7 +26,7 @@ import numpy as np
 from .anisotropic_voronoi import periodic_voronoi_labels
 from .contact_points import random_face_contacts
 from .damped_erosion import GAUSSIAN, damping_field, erode
-from .rock_meshes import anchor_voxels, blur_field, field_padding, mesh_rock
+from .rock_meshes import anchor_voxels, blur_field, bounding_radius, field_padding, mesh_rock
 from .rock_store import RockStore
 from .seed_points import hash_keys
 from .tile_params import TileParams
@@ -128,7 +128,7 @@ def build_periodic_tile(params: TileParams, progress=None) -> RockStore:
         p = pts[k] * P
         v = verts.astype(np.float64) * P
         rocks.append(dict(vertices=v.astype(np.float32), faces=faces, normals=normals, seed=p,
-                          radius=float(np.sqrt(((v - p) ** 2).sum(axis=1).max())),
+                          radius=bounding_radius(v, p),
                           uid=hash_keys(params.seed, 0x9E81, k)[()], slot=0,
                           anchors=anchors.astype(np.float32)))
     meta = dict(tiling="periodic", params=params.to_dict(), cells_per_period=P, voxels_per_cell=N / P,
