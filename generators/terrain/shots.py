@@ -193,7 +193,7 @@ class _Scene:
 
 
 def _score(scene, plain, origins, targets, fov, aspect, voxel, dist):
-    """Scores, covers and skies of many views at once (one batch of rays)."""
+    """Scores, covers, skies and :func:`legibility` of many views at once (one batch of rays)."""
     D = np.stack([_rays(o, t, fov, aspect) for o, t in zip(origins, targets)])  # (n, h, w, 3)
     n, h, w, _ = D.shape
     flat = D.reshape(-1, 3)
@@ -246,20 +246,19 @@ def legibility(D, t, hit):
     n, h, w = t.shape
     sky = ((~hit) & (D[..., 2] > 0)).reshape(n, -1).mean(axis=1)
     depth, sheet = np.ones(n), np.zeros(n)
+    # Ray pairs of the grid: each ray with its right and its lower neighbour.
     idx = np.arange(h * w).reshape(h, w)
-    pairs = [(idx[:, :-1], idx[:, 1:]), (idx[:-1], idx[1:])]
+    a = np.concatenate([idx[:, :-1].ravel(), idx[:-1].ravel()])
+    b = np.concatenate([idx[:, 1:].ravel(), idx[1:].ravel()])
     for i in range(n):
-        ti, hi = t[i].ravel(), hit[i].ravel()
-        if hi.sum() >= 8:
-            lo_q, hi_q = np.percentile(ti[hi], [10, 90])
-            depth[i] = hi_q / max(lo_q, 1e-9)
-        a = np.concatenate([p[0].ravel() for p in pairs])
-        b = np.concatenate([p[1].ravel() for p in pairs])
-        with np.errstate(invalid="ignore"):
-            join = hi[a] & hi[b] & (np.abs(ti[a] - ti[b]) <= SHEET_STEP * np.maximum(ti[a], ti[b]))
+        ti, hits = t[i].ravel(), hit[i].ravel()
+        if hits.sum() >= 8:
+            near, far = np.percentile(ti[hits], [10, 90])
+            depth[i] = far / max(near, 1e-9)
+        with np.errstate(invalid="ignore"):  # (inf - inf between two misses: not joined)
+            join = hits[a] & hits[b] & (np.abs(ti[a] - ti[b]) <= SHEET_STEP * np.maximum(ti[a], ti[b]))
         graph = coo_matrix((np.ones(int(join.sum())), (a[join], b[join])), shape=(h * w, h * w))
-        _, label = connected_components(graph, directed=False)
-        label = label[hi]
+        label = connected_components(graph, directed=False)[1][hits]
         sheet[i] = np.bincount(label).max() / (h * w) if len(label) else 0.0
     legible = (sky >= LEGIBLE["sky"]) & (depth >= LEGIBLE["depth"]) & (sheet <= LEGIBLE["one_surface"])
     return {"sky": sky, "depth": depth, "one_surface": sheet, "legible": legible}

@@ -356,8 +356,9 @@ class SkeletalSet(Node):
         return 3.0 + per * min(self.max_per_cell, 8)
 
     def nbytes(self):
-        # Per stored cell: start, count, L, M, slope start and count, [empty, near start and count].
-        per_cell = 24 + (12 if self._near is not None else 0)
+        # Per stored cell: start, count, L, M, slope start and count, [empty, near start and
+        # count, unlisted gap].
+        per_cell = 24 + (16 if self._near is not None else 0)
         near = (self.near_len + self.slope_len) * 4 + self.n * 4 * (2 if self._near is not None else 1)
         return (64 + self.n * 12 * 4 + self.layout.stored_cells * per_cell + self.layout.nbytes()
                 + self.list_len * 4 + near)
