@@ -35,15 +35,20 @@ def test_mirrored_relief_is_the_dem_inside_its_mirror_outside_and_the_mean_far_a
     n = H.shape[0]
     d = extent[2] / (n - 1)
     j, i = np.mgrid[0:n, 0:n]
+    # atol 1e-9 m on heights of 100-500 m: float64 rounding of the sample coordinates and
+    # the bilinear weights only (measured: 0, exact at the samples).
     assert np.allclose(relief.heights(i.ravel() * d, j.ravel() * d, 0.0), H.ravel(), atol=1e-9)
     # Mirrored about the border samples: a point at distance a past the right border
     # has the height of the point a inside it.
     a = np.linspace(0.0, 0.9 * extent[2], 50)
     y = np.full_like(a, 0.37 * extent[3])
+    # (the same float64 rounding: the reflected coordinate is computed, not looked up)
     assert np.allclose(relief.heights(extent[2] + a, y, 0.0), relief.heights(extent[2] - a, y, 0.0), atol=1e-9)
     assert np.allclose(relief.heights(-a, y, 0.0), relief.heights(a, y, 0.0), atol=1e-9)
     # A blur wider than the tile: the DEM's mean height everywhere.
     far = relief.heights(np.array([-5e4, 3e3, 9e5]), np.array([2e5, -7e3, 1e3]), 40.0 * extent[2])
+    # Exactly the mean past the coarsest level: atol 1e-6 m is float64 rounding of the
+    # blend weights (w = 1) and of the mean itself.
     assert np.allclose(far, H.mean(), atol=1e-6)
     # Blurs in between lower the ridge's crest smoothly.
     crest = [float(relief.heights(np.array([0.8 * extent[2]]), np.array([0.5 * extent[3]]), s)[0])

@@ -119,21 +119,28 @@ class MirroredRelief:
     """
 
     def __init__(self, H, extent):
-        from scipy.ndimage import gaussian_filter
         H = np.asarray(H, np.float64)
         self.shape = H.shape
         x0, y0, x1, y1 = (float(v) for v in extent)
         ny, nx = H.shape
         self.origin = (x0, y0)
         self.spacing = ((x1 - x0) / max(nx - 1, 1), (y1 - y0) / max(ny - 1, 1))
+        # Blur of each level in level-0 samples (a blur of one sample of level j is 2^j of
+        # level 0); the levels themselves are built when first asked for (an unblurred
+        # query, as the overview camera's, needs none).
         self.levels, self.sigmas = [H], [0.0]
-        var = 0.0
-        while min(self.levels[-1].shape) > 2:
-            j = len(self.levels) - 1
-            self.levels.append(gaussian_filter(self.levels[-1], 1.0, mode="mirror")[::2, ::2])
-            var += 4.0 ** j  # a blur of one sample of level j: 2^j samples of level 0
-            self.sigmas.append(math.sqrt(var))
+        size = min(H.shape)
+        while size > 2:
+            size = (size + 1) // 2
+            self.sigmas.append(math.sqrt(self.sigmas[-1] ** 2 + 4.0 ** (len(self.sigmas) - 1)))
         self.mean = float(H.mean())
+
+    def _level(self, j):
+        """Level ``j`` of the pyramid (built up to it on first use)."""
+        from scipy.ndimage import gaussian_filter
+        while len(self.levels) <= j:
+            self.levels.append(gaussian_filter(self.levels[-1], 1.0, mode="mirror")[::2, ::2])
+        return self.levels[j]
 
     def _mirror(self, x, y):
         """Level-0 sample coordinates ``(u, v)`` of world points, reflected into the tile."""
@@ -158,7 +165,7 @@ class MirroredRelief:
 
         def level(j):
             scale = 0.5 ** j
-            return map_coordinates(self.levels[j], [v * scale, u * scale], order=1, mode="nearest")
+            return map_coordinates(self._level(j), [v * scale, u * scale], order=1, mode="nearest")
 
         top = len(self.sigmas) - 1
         if s >= self.sigmas[top]:
@@ -269,7 +276,7 @@ def far_field_mesh(node, reach=None):
 
 
 def ring_distances(first: float, reach: float, growth: float = _GROWTH) -> list:
-    """Distances of the rings from the border: ``0, first``, then ``x 1.35`` each, and ``reach``.
+    """Distances of the rings from the border: ``0, first``, then ``x growth`` each, and ``reach``.
 
     Parameters
     ----------
@@ -277,6 +284,8 @@ def ring_distances(first: float, reach: float, growth: float = _GROWTH) -> list:
         The first ring's distance (metres, > 0).
     reach : float
         The last ring's distance (metres).
+    growth : float
+        Ratio of successive distances (> 1; the sea's rings 1.35, the ground's ``1 + 0.7 / DETAIL``).
 
     Returns
     -------

@@ -104,13 +104,10 @@ SLOPE_REACH = 0.125
 #: hold the slope lists.
 NEAR_REACH = 0.25
 
-#: How far the distance bounds below the threshold may reach past the near lists, in
-#: cell edges: each cell stores the gap to the nearest support left out of its near
-#: list (:func:`~arches_render.field.primitive_set.unlisted_gaps`), at most this, and
-#: steps stop there instead of at ``NEAR_REACH``. Over the goblins' hoodoos (320x180)
-#: lists grown by 1 or 2 cell edges took camera steps from 49.6 to 37.5 or 33.5 a ray
-#: (bounce 41.2 to 34.9 or 32.3) but cost more per step; the gaps give those steps with
-#: the short lists.
+#: Cell edges past the near lists the level bounds may reach: each cell stores its gap to
+#: the nearest support left out of its near list (:func:`~arches_render.field.primitive_set.unlisted_gaps`),
+#: up to this. Goblins (320x180): camera steps 49.6 -> 39.9 a ray with the short lists
+#: (lists grown by 2 cell edges: 33.5, but dearer steps); a reach of 4 bought nothing more.
 UNLISTED_REACH = 2.0
 
 
@@ -356,8 +353,7 @@ class SkeletalSet(Node):
         return 3.0 + per * min(self.max_per_cell, 8)
 
     def nbytes(self):
-        # Per stored cell: start, count, L, M, slope start and count, [empty, near start and
-        # count, unlisted gap].
+        # Per stored cell: start, count, L, M, slope start, count [empty, near start, count, gap].
         per_cell = 24 + (16 if self._near is not None else 0)
         near = (self.near_len + self.slope_len) * 4 + self.n * 4 * (2 if self._near is not None else 1)
         return (64 + self.n * 12 * 4 + self.layout.stored_cells * per_cell + self.layout.nbytes()
