@@ -201,6 +201,19 @@ def test_cli_preview_rejects_a_bad_scene_in_one_line(tmp_path):
     assert len(lines) == 1 and "bad.toml" in lines[0] and "Traceback" not in out.stderr
 
 
+def _wait_until_done_picture_shown(page):
+    """Wait for the status line to say done and for the done picture itself to be on screen.
+
+    The page sets its status from the event at once but swaps the picture only when the
+    next one has loaded, so "done" alone can be read while the previous picture still shows
+    (CI once saw the done picture arrive after the next step had read the old one).
+    """
+    page.wait_for_function("document.getElementById('status').textContent.startsWith('done')", timeout=300_000)
+    done = json.loads(page.evaluate("fetch('/state').then(r => r.text())"))["picture"]
+    page.wait_for_function(f"Number(document.getElementById('picture').dataset.picture) >= {done}",
+                           timeout=60_000)
+
+
 def test_preview_page_in_chromium_shows_updates_and_errors(tmp_path):
     playwright = pytest.importorskip("playwright.sync_api", reason="the test extra installs playwright")
     assert Path(CHROMIUM).exists(), "bash setup.sh test installs Debian's chromium"
@@ -219,16 +232,14 @@ def test_preview_page_in_chromium_shows_updates_and_errors(tmp_path):
             page = browser.new_page()
             page.goto(url)
             page.wait_for_function("document.getElementById('picture').naturalWidth > 0", timeout=120_000)
-            page.wait_for_function("document.getElementById('status').textContent.startsWith('done')",
-                                   timeout=300_000)
+            _wait_until_done_picture_shown(page)
             shown = int(page.get_attribute("#picture", "data-picture"))
             src = page.get_attribute("#picture", "src")
             # Saved edit: the watcher sees it, the page shows a newer picture.
             path.write_text(path.read_text().replace("elevation = 33.0", "elevation = 15.0"))
             page.wait_for_function(f"Number(document.getElementById('picture').dataset.picture) > {shown}",
                                    timeout=120_000)
-            page.wait_for_function("document.getElementById('status').textContent.startsWith('done')",
-                                   timeout=300_000)
+            _wait_until_done_picture_shown(page)
             assert page.get_attribute("#picture", "src") != src
             # Broken edit: the error line, and the last picture stays on screen.
             last = page.get_attribute("#picture", "src")
