@@ -267,3 +267,24 @@ def test_accessibility_of_open_ground_is_one_at_any_reach():
     for reach in (13.7, 20.0, 0.3):
         a = accessibility(mesh, [[1.0, 2.0, 0.0]], [[0.0, 0.0, 1.0]], reach, rays=64, seed=0)
         assert a[0] == 1.0
+
+
+# -- geology of the river preset ----------------------------------------------------------------
+@pytest.mark.parametrize("zlo,zhi,spacing", [(0.0, 160.0, 20.0), (-40.0, 1500.0, 15.0), (100.0, 104.0, 30.0)])
+def test_river_beds_cover_the_relief_irregularly_within_their_ranges(zlo, zhi, spacing):
+    from arches_render.generators.terrain.presets import MAX_BEDS, bed_planes
+    beds = bed_planes(zlo, zhi, spacing, np.random.default_rng(5))
+    z = np.array([b["point"][2] for b in beds])
+    R = np.array([b["R"] for b in beds])
+    w = np.array([b["weight"] for b in beds])
+    used = max(spacing, 2.0 * (zhi - zlo) / (MAX_BEDS - 5))  # widened where beds would outnumber the cap
+    assert 2 <= len(beds) <= MAX_BEDS
+    # The relief and a spacing beyond each end are covered: no gap wider than 1.5 spacings.
+    assert z[0] <= zlo and z[-1] >= zhi
+    gaps = np.diff(z) / used
+    assert np.all(gaps >= 0.5) and np.all(gaps <= 1.5)
+    assert np.all((R >= 0.15 * used) & (R <= 0.45 * used)) and np.all((w >= -0.85) & (w <= -0.3))
+    if len(beds) >= 4:  # irregular: not one repeated bed (the periodic strata this replaced)
+        assert np.ptp(gaps) > 0.1 and np.ptp(R / used) > 0.05 and np.ptp(w) > 0.05
+    # Same generator state, same beds.
+    assert bed_planes(zlo, zhi, spacing, np.random.default_rng(5)) == beds

@@ -210,25 +210,71 @@ def sea(run: Amplification) -> None:
 
 # -- river ------------------------------------------------------------------------------------
 def river_geology(run: Amplification, noise_seed: int) -> dict:
-    """Soft horizontal strata in a hard rock, each bed of its own hardness: undercuts where
-    the river meets the soft ones.
+    """Soft horizontal beds in a hard rock, each of its own depth, thickness and softness:
+    undercuts where the river meets the soft ones.
 
-    As for the hoodoos (:func:`hoodoos_geology`), the periodic beds alone repeat one
-    hardness profile up the walls: every soft bed was undercut alike and the strata
-    colours were a uniform stripe. The paper's turbulence primitive over elevation,
-    ``rho = t(p_z / lambda0)`` (Paris et al. 2019, Sec. 4.1; ``lambda0`` three beds),
-    gives each bed its own hardness, so some soft beds are barely softer than the rock
-    around them and others are deeply undercut.
+    The paper builds its geology trees by "blending multiple plane primitives with a
+    turbulence primitive" (Paris et al. 2019, Sec. 4.2). Periodic beds (one
+    ``resistance_strata``) repeated one hardness profile up every wall: each soft bed
+    was undercut alike and the strata colours (levels of the resistance) read as a
+    uniform stripe, even with the turbulence over elevation (Sec. 4.1) varying each
+    bed's peak. So the beds are plane primitives placed by :func:`bed_planes`: gaps of
+    half to one and a half times the mean spacing, half-thicknesses of 0.15 to 0.45 of
+    it and weights -0.3 to -0.85 (mean -0.575, the periodic beds' was -0.6), so a thin
+    bed barely softer than the rock beside it reaches only the middle colours while a
+    thick, soft one is undercut deeply and shows the darkest. The 3-D turbulence (joints)
+    and the one over elevation stay.
     """
-    zlo, _, Z = run.relief
+    zlo, zhi, Z = run.relief
     F = run.feature
     spacing = float(np.clip(run.scale("strata_thickness_m", Z / 8), 2.0 * F, max(2.0 * F, Z / 3)))
     return {"type": "resistance_blend", "children": [
         {"type": "resistance_constant", "value": 0.75},
-        {"type": "resistance_strata", "spacing": float(spacing), "R": float(0.3 * spacing),
-         "weight": -0.6, "phase": float(zlo)},
+        *bed_planes(zlo, zhi, spacing, np.random.default_rng(noise_seed + 2)),
         _turbulence(noise_seed, 2.0 * F, 0.1, 3, strata=False),
         _turbulence(noise_seed + 1, 3.0 * spacing, 0.25, 3, strata=True)]}
+
+
+#: Most soft beds :func:`bed_planes` places (each is a node of the geology tree,
+#: evaluated wherever the strata colour is shaded).
+MAX_BEDS = 24
+
+
+def bed_planes(zlo: float, zhi: float, spacing: float, rng: np.random.Generator) -> list[dict]:
+    """Soft horizontal beds from below ``zlo`` to above ``zhi``, irregularly spaced.
+
+    Parameters
+    ----------
+    zlo, zhi : float
+        The relief's lowest and highest elevation (metres).
+    spacing : float
+        The mean distance between beds (metres). Widened to at least
+        ``2 (zhi - zlo) / (MAX_BEDS - 5)`` so that beds at the smallest gap (half a
+        spacing) from up to one spacing below ``zlo`` to the first at or above ``zhi``
+        number fewer than :data:`MAX_BEDS`.
+    rng : numpy.random.Generator
+        Draws the beds (the same generator state, the same beds).
+
+    Returns
+    -------
+    list of dict
+        ``resistance_plane`` tables: point on the bed's mid-plane, normal +Z, ``R``
+        (the falloff radius: the bed's half-thickness) in ``[0.15, 0.45] spacing``,
+        ``weight`` in ``[-0.85, -0.3]``; consecutive beds ``[0.5, 1.5] spacing`` apart.
+
+    References
+    ----------
+    Paris, A. et al. (2019). Terrain amplification with implicit 3D features. ACM TOG
+    38(5), Sec. 4.2 (plane primitives blended into a geology tree).
+    """
+    spacing = max(float(spacing), 2.0 * (zhi - zlo) / (MAX_BEDS - 5))
+    beds, z = [], zlo - spacing * rng.uniform(0.0, 1.0)
+    while True:
+        beds.append({"type": "resistance_plane", "point": [0.0, 0.0, float(z)], "normal": [0.0, 0.0, 1.0],
+                     "R": float(spacing * rng.uniform(0.15, 0.45)), "weight": float(-rng.uniform(0.3, 0.85))})
+        if z >= zhi:
+            return beds
+        z += spacing * rng.uniform(0.5, 1.5)
 
 
 def river(run: Amplification) -> None:
