@@ -122,12 +122,17 @@ def test_a_preset_that_makes_nothing_hands_over_to_the_next(tmp_path, capsys, mo
     rc, stdout, err = _amplify(capsys, tmp_path / "alps.npy", out, "--cell-size", 200)
     assert rc == 0, err
     said = _nothing_lines(stdout)
-    assert "karst preset made 0 primitives" in said[0] and "trying strata" in said[0], stdout
+    # auto ran every applicable preset: the ranking says karst made nothing, and why,
+    # and puts it last (issue 34: presets ranked by what they make).
+    ranked = [line for line in stdout.splitlines() if "auto ranked the presets" in line]
+    assert len(ranked) == 1 and "karst nothing (no tunnel percolated from the sinks)" in ranked[0], stdout
+    assert "Order: by volume (karst, the DEM's choice, makes under 1 landform)" in ranked[0], stdout
     kept = next(line.split()[3] for line in stdout.splitlines() if line.startswith("arches-render amplify: preset "))
     assert kept in ("strata", "hoodoos", "river"), stdout
     cams = _cameras(out)
     assert len(cams) >= 2 and cams[-1] == "overview", cams
     head = _header(out)
+    assert ranked[0].split(": ", 2)[2] in head, head
     assert [line for line in head if line.startswith("nothing to carve")] == [line.split(": ", 2)[2] for line in said]
     assert any(line.startswith(f"Preset {kept}: ") for line in head), head
     # Only the kept attempt's data are published (the others' were in work folders, removed).
@@ -166,7 +171,7 @@ def test_a_chosen_preset_that_finds_nothing_says_how_to_get_more(tmp_path, capsy
     assert rc == 0, err
     said = _nothing_lines(stdout)
     assert len(said) == 1 and "no escarpment" in said[0] and "--preset auto" in said[0], stdout
-    assert "preset strata" in stdout
+    assert "preset strata" in stdout and "auto ranked" not in stdout  # the user's preset runs alone
     _info(capsys, out)
 
 

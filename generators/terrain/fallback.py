@@ -1,34 +1,36 @@
-"""Presets that fail soft: when one finds nothing to carve, the next applicable one runs (issue 22).
+"""Presets that fail soft and rank by what they make (issues 22, 34).
 
 A preset can find nothing on a DEM it was chosen for: a low sandy coast has a sea
 but no cliff for waves to undercut; the karst lattice of a 200 m DEM of high
 mountains is so wide that its tunnels stay deep in the rock, out of any camera's
 sight. Such a run used to end in a traceback or in a scene with the overview
-camera alone. :func:`amplify_soft` runs the presets in the order of
-:func:`preset_candidates` and keeps the first that makes a landform a close shot
-can frame (:func:`.shots.close_shots`, the same measure the scene writer uses for
-its cameras); each one that does not is said in one line (``nothing to carve:
-...``) that the command prints and writes in the scene's header.
+camera alone. With ``--preset auto``, :func:`amplify_soft` amplifies every preset
+:func:`preset_candidates` allows, orders them by the 3-D landforms each made
+(:mod:`.preset_ranking`, said in one header line) and keeps the first that makes a
+landform a close shot can frame (:func:`.shots.close_shots`, the same measure the
+scene writer uses for its cameras); each one passed over is said in one line
+(``nothing to carve: ...``) that the command prints and writes in the scene's header.
 
 What counts as nothing
     No primitive (the preset's own reason, from ``stats["nothing"]``, or the
     default of :data:`NOTHING`), or primitives without a close shot: no landform
     with 3-D volume (overhangs, caves, arches, standing matter) seen with sky
     from a camera in air over the tile.
-Order
+Candidates
     ``--preset auto``: the preset :func:`.preset_choice.choose_preset` picks, then
     the others that the DEM's measures allow, cliff landforms first (a DEM with
     escarpments gets undercut beds before anything else): ``sea`` (a sea at the
     border), ``strata`` and ``hoodoos`` (slopes over 30 deg on 3 % of the land),
     ``river`` (always: water shapes most land), ``karst`` (a closed depression).
-    A preset named with ``--preset`` runs alone: the user chose it, so it is not
-    replaced, but the line says that ``auto`` would try the others.
+    The ranking keeps the choice first unless it made under one landform's worth;
+    ties keep this order. A preset named with ``--preset`` runs alone: the user chose it, so it is
+    not replaced, but the line says that ``auto`` would try the others.
 When all fail
-    The first attempt is kept (the chosen preset's geology still colours the
+    The first attempt in the ranked order is kept (its geology still colours the
     rock), with a last line saying the scene is the terrain and what it made.
 
 Each attempt writes its data into a folder of its own, so the files of the kept
-one are never overwritten by a later one; the same seed gives the same attempts.
+one are never overwritten by another; the same seed gives the same attempts.
 
 References
 ----------
@@ -45,6 +47,7 @@ import numpy as np
 
 from .amplify import amplify
 from .preset_choice import choose_preset
+from .preset_ranking import rank_order, ranking_line, visible_volume
 from .scene_writer import scene_document
 
 __all__ = ["NOTHING", "preset_candidates", "Attempt", "amplify_soft"]
@@ -115,7 +118,7 @@ class Attempt:
 
 def amplify_soft(heights, cell_size, preset, seed, work_dir, prefix, name, sea_level=0.0, precision=None,
                  progress=None, shots_progress=None, say=None):
-    """Amplify with the first preset that makes a landform (see the module docstring).
+    """Amplify with the best preset that makes a landform (see the module docstring).
 
     Parameters
     ----------
@@ -139,23 +142,48 @@ def amplify_soft(heights, cell_size, preset, seed, work_dir, prefix, name, sea_l
     progress, shots_progress : callable, optional
         Progress of the amplification steps and of the close shots.
     say : callable, optional
-        ``say(line)`` for each ``nothing to carve`` line, as it happens.
+        ``say(line)`` for the ranking line and each ``nothing to carve`` line, as it happens.
 
     Returns
     -------
     Attempt
-        ``notes`` holds the ``nothing to carve`` lines (also for the header).
+        ``notes`` holds the ranking and ``nothing to carve`` lines (also for the header).
     """
     level = 0.0 if sea_level is None else float(sea_level)
     H = np.asarray(heights, dtype=np.float32).astype(np.float64)
     candidates = preset_candidates(H, cell_size, level) if preset == "auto" else [(preset, "chosen by the user")]
-    notes, first = [], None
+    notes = []
+
+    def tell(line):
+        notes.append(line)
+        if say:
+            say(line)
+
+    runs = []
     for k, (choice, reason) in enumerate(candidates):
         folder = Path(work_dir) / (f"_try{k + 1}" if k else "")
         result = amplify(H, cell_size, choice, seed, folder, prefix, sea_level=sea_level, precision=precision,
                          progress=progress)
         result.reason = reason
-        st = result.stats
+        runs.append((result, folder))
+        if "note" in result.stats:  # a flat DEM: no preset acts on it
+            break
+    if len(runs) > 1:
+        # --preset auto: every applicable preset ran; try them in the order of what they made.
+        volumes, features = zip(*(visible_volume(r) for r, _ in runs))
+        order = rank_order(volumes, features)
+        tell(ranking_line([r.preset for r, _ in runs], volumes, features, [r.stats["primitives"] for r, _ in runs],
+                          order, [r.stats.get("nothing", NOTHING[r.preset]) for r, _ in runs]))
+        runs = [runs[i] for i in order]
+    return _keep_first_with_shots(runs, name, preset, shots_progress, notes, tell)
+
+
+def _keep_first_with_shots(runs, name, preset, shots_progress, notes, tell):
+    """The first of ``runs`` (``(Amplified, folder)``, in the order to try) whose landforms
+    a close shot frames, else the first; a ``nothing to carve`` line for each one passed."""
+    first = None
+    for k, (result, folder) in enumerate(runs):
+        choice, st = result.preset, result.stats
         made = st["primitives"] > 0
         doc, lines = scene_document(result, name, folder, progress=shots_progress) if made or first is None \
             else (None, None)
@@ -164,26 +192,21 @@ def amplify_soft(heights, cell_size, preset, seed, work_dir, prefix, name, sea_l
             first = attempt
         if made and attempt.close_shots:
             return attempt
-        if "note" in st:  # a flat DEM: no preset acts on it
+        if "note" in st:
             why = st["note"]
         elif not made:
             why = f"the {choice} preset made 0 primitives ({st.get('nothing', NOTHING[choice])})"
         else:
             why = (f"the {choice} preset made {st['primitives']} primitives but no landform a close shot "
                    f"can frame (all within the rock or under the DEM's detail)")
-        rest = candidates[k + 1:] if "note" not in st else []
+        rest = runs[k + 1:]
         if rest:
-            then = f"trying {rest[0][0]} ({rest[0][1]})"
+            then = f"trying {rest[0][0].preset} ({rest[0][0].reason})"
         elif first.result.stats["primitives"]:
             then = f"the scene keeps what the {first.result.preset} preset made"
         else:
             then = "the scene is the terrain alone"
         if not rest and preset != "auto":
             then += " (--preset auto tries the other presets)"
-        line = f"nothing to carve: {why}; {then}"
-        notes.append(line)
-        if say:
-            say(line)
-        if not rest:
-            break
+        tell(f"nothing to carve: {why}; {then}")
     return first

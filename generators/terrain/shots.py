@@ -124,8 +124,14 @@ def landform_cells(root, extent, feature, cells=24):
     return out
 
 
-def landform_volume(root, plain, box, cells=48):
-    """3-D volume (m^3) of the landform in ``box = (lo, hi, ...)`` (module docstring) and the voxel size."""
+def landform_volume(root, plain, box, cells=48, reach=None):
+    """3-D volume (m^3) of the landform in ``box = (lo, hi, ...)`` (module docstring) and the voxel size.
+
+    With ``reach`` (metres), only the air a camera could look into counts: air under
+    matter within ``reach`` of open sky (air with no matter above it in its column),
+    the distance taken through the air (6-connected voxel steps), so a tunnel network
+    deep in the rock counts only its first ``reach`` inside each cave mouth
+    (:mod:`.preset_ranking`)."""
     lo, hi = (np.asarray(v, np.float64) for v in box[:2])
     voxel = float(np.max(hi - lo)) / cells
     axes = [np.arange(lo[i] + 0.5 * voxel, hi[i], voxel) for i in range(3)]
@@ -140,6 +146,10 @@ def landform_volume(root, plain, box, cells=48):
     standing = amp & ~base  # hoodoos and other positive landforms
     # Lowered ground (a dent, a wider channel) counts a quarter: a 2.5-D change.
     lowered = base & ~amp & ~overhang
+    if reach is not None and overhang.any():
+        from scipy.ndimage import binary_dilation
+        steps = max(1, int(math.ceil(reach / voxel)))
+        overhang &= binary_dilation(~amp & ~above, iterations=steps, mask=~amp)
     return float((overhang.sum() + standing.sum() + 0.25 * lowered.sum()) * voxel ** 3), voxel
 
 
