@@ -252,3 +252,18 @@ def test_escarpment_at_coarse_cells_gets_legible_close_shots(tmp_path, capsys):
         # (the header rounds: a percent and a tenth)
         assert float(sky) >= 100 * LEGIBLE["sky"] - 0.5 and float(depth) >= LEGIBLE["depth"] - 0.05, cams
         assert float(sheet) <= 100 * LEGIBLE["one_surface"] + 0.5, cams
+
+
+def test_one_sun_lights_the_close_shot_from_behind_and_never_looks_into_the_overview():
+    from arches_render.generators.terrain.scene_writer import sun_for
+    # One view: behind it, turned aside by 55 degrees (as before the overview had a say).
+    assert sun_for({"azimuth": 30.0})["azimuth"] == -95.0  # 30 + 180 + 55, wrapped
+    # A close shot looking east and an overview looking west: the sun from the side of both.
+    sun = sun_for([{"azimuth": 0.0}, {"azimuth": 180.0}])["azimuth"]
+    assert abs(abs(sun) - 90.0) < 1e-9, sun
+    # Any pair: neither view faces the sun (over 90 degrees from each view direction).
+    rng = np.random.default_rng(4)
+    for a, b in rng.uniform(-180.0, 180.0, (200, 2)):
+        sun = sun_for([{"azimuth": a}, {"azimuth": b}])["azimuth"]
+        for view in (a, b):
+            assert abs((sun - view + 180.0) % 360.0 - 180.0) >= 90.0, (a, b, sun)

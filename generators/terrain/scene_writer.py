@@ -214,11 +214,49 @@ def frame_camera(heights, extent, features=None, fov=50.0, elevation=10.0, margi
                 azimuth=math.degrees(math.atan2(view[1], view[0])))
 
 
-def sun_for(camera, elevation=35.0, turn=55.0):
-    """A ``[[lights]]`` sunsky table lighting the faces the camera sees."""
-    # The sun sits behind the camera, turned aside: azimuth of the direction *towards* the sun.
-    az = camera["azimuth"] + 180.0 + turn
-    az = (az + 180.0) % 360.0 - 180.0
+def sun_for(views, elevation=35.0, turn=55.0):
+    """A ``[[lights]]`` sunsky table lighting the faces the cameras see.
+
+    Parameters
+    ----------
+    views : dict or list of dict
+        Camera tables with ``azimuth``, the direction each looks in (degrees
+        counter-clockwise from +x); the first matters most.
+    elevation : float
+        The sun's elevation (degrees).
+    turn : float
+        How far the sun is turned aside from straight behind a camera (degrees).
+
+    Returns
+    -------
+    dict
+        ``type = "sunsky"`` with ``azimuth`` the direction *towards* the sun.
+
+    Notes
+    -----
+    For one view the sun sits behind it, turned aside by ``turn``: the faces it sees
+    are lit and their relief casts shadows sideways. For several (a close shot and the
+    overview, which may look the other way) the azimuth, among a 1-degree circle, the
+    first view's own choice and the directions where two views' angles balance, keeps
+    every view's angle to the sun nearest that ideal ``180 - turn`` in the worst case
+    (max-min; ties keep the first view's choice): two views looking opposite ways get
+    the sun from the side of both, never in the lens of one (the overview of a small
+    volcano looked into a sun 35 degrees up and its sky came out white).
+    """
+    views = [views] if isinstance(views, dict) else list(views)
+    wrap = lambda a: (a + 180.0) % 360.0 - 180.0  # noqa: E731
+    ideal = 180.0 - turn
+    own = wrap(views[0]["azimuth"] + 180.0 + turn)  # behind the first view, turned aside
+    # The 1-degree circle, and exactly the directions where two views' angles balance (their
+    # bisectors and the perpendiculars): near-opposite views have their optimum there.
+    mids = [v["azimuth"] + 0.5 * wrap(w["azimuth"] - v["azimuth"]) for v in views for w in views]
+    candidates = ([own] + [float(a) for a in range(-180, 180)]
+                  + [wrap(m + k) for m in mids for k in (90.0, -90.0, 180.0)])
+
+    def worst(az):
+        return min(-abs(abs(wrap(az - v["azimuth"])) - ideal) for v in views)
+
+    az = max(candidates, key=worst)  # (max keeps the first of equals: the first view's own choice)
     return {"type": "sunsky", "elevation": float(elevation), "azimuth": float(az), "turbidity": 3.0}
 
 
@@ -310,13 +348,18 @@ def scene_document(result, name, work_dir, progress=None, close=3):
     over = frame_camera(H, extent, result.focus)
     cameras["overview"] = {"origin": over["origin"], "target": over["target"], "fov": over["fov"]}
     first = next(iter(cameras.values()))
+    # One sun for the close shots and the overview: lighting the first shot from behind
+    # could put it in the overview's lens.
+    views = [dict(first, azimuth=_view_azimuth(first))]
+    if len(cameras) > 1:
+        views.append(dict(cameras["overview"], azimuth=_view_azimuth(cameras["overview"])))
     doc = {
         "scene": {"name": name,
                   "description": f"DEM amplified with the '{result.preset}' preset (seed {stats['seed']}): "
                                  f"{stats['nodes']} nodes, {stats['primitives']} primitives"},
         "render": {"resolution": [640, 360], "spp": 32, "max_depth": 3},
         "cameras": cameras,
-        "lights": [sun_for(dict(first, azimuth=_view_azimuth(first)))],
+        "lights": [sun_for(views)],
         "materials": {"landscape": landscape_material(zlo, zhi, result.sea_level, *_geology(result),
                                                       preset=result.preset, cell=stats["cell_size"])},
         "field": {"root": "world", "material": "landscape"},
