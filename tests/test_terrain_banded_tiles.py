@@ -13,6 +13,7 @@ from skimage.measure import marching_cubes  # noqa: E402
 
 from arches_render.field import evaluate  # noqa: E402
 from arches_render.generators.terrain import tiled_mc  # noqa: E402
+from arches_render.mesh import lewiner  # noqa: E402
 from arches_render.generators.terrain.banded import BandStats, _Grid, polygonize_banded, polygonize_dense  # noqa: E402
 from arches_render.generators.terrain.benchmarks import sea_tree  # noqa: E402
 
@@ -112,8 +113,7 @@ def test_plain_cases_emit_scikit_image_triangles():
     """The numba path for Lewiner's plain cases (1, 2, 5, 8, 9, 11, 14) emits, for
     every cube configuration, the triangles scikit-image emits (positions, winding),
     and declines the cases with face or interior tests."""
-    T = tiled_mc._tables()
-    luts = (T["cases"], T["til"], T["ntri"], T["corner"], T["edge_lo"], T["edge_axis"])
+    T = lewiner.lewiner_tables()
     rng = np.random.default_rng(0)
 
     def triangles(g, f):
@@ -130,11 +130,10 @@ def test_plain_cases_emit_scikit_image_triangles():
                 vol[di, dj, dk] = mags[c] if (idx >> c) & 1 else -mags[c]
             if trial == 2:
                 vol[0, 0, 0] = 0.0  # a corner on the surface
-            ok, g, _, _, f = tiled_mc._plain_run(vol, np.zeros(3, np.int64), np.array([0, 1, 0, 1]), 2, 2,
-                                                 tiled_mc.DELTA, *luts)
+            ok, g, _, _, f, _ = lewiner.plain_volume(vol, exact=False, box=(0, 1, 0, 1), delta=tiled_mc.DELTA)
             actual = sum(1 << c for c, (di, dj, dk) in enumerate(T["corner"]) if vol[di, dj, dk] > 0)
             case = T["cases"][actual, 0]
-            assert ok == (case == 0 or case in tiled_mc._PLAIN)
+            assert ok == (case == 0 or case in lewiner.PLAIN)
             if not ok:
                 declined += 1
                 continue

@@ -34,10 +34,9 @@ from __future__ import annotations
 
 import numba
 import numpy as np
-from skimage.measure import _marching_cubes_lewiner as _lewiner
-from skimage.measure import _marching_cubes_lewiner_luts as _luts
 from skimage.measure import marching_cubes
 
+from arches_render.mesh.lewiner import lewiner_luts, plain_runs
 from arches_render.mesh.polygonize import TriangleMesh, oriented_mesh
 
 __all__ = ["TILE", "DELTA", "mesh_runs"]
@@ -167,177 +166,6 @@ def _stitch(g, faces, keys, order, voxel, lo):
     return out_g, out_f[:m]
 
 
-#: Lewiner's cases whose tiling is a fixed table (no face or interior test).
-_PLAIN = (1, 2, 5, 8, 9, 11, 14)
-_TABLES = {}
-
-
-def _tables():
-    """scikit-image's Lewiner tables for the plain cases, as arrays for numba:
-    ``cases (256, 2)``, ``til (15, 48, 12)`` edge lists, ``ntri (15,)`` (0: not plain),
-    corner offsets ``(8, 3)`` and edge lower ends ``(12, 3)`` and axes ``(12,)`` in
-    array axes ``(i, j, k)`` (Lewiner's ``x, y, z`` are the array's axes 2, 1, 0)."""
-    if not _TABLES:
-        til = np.zeros((15, 48, 12), dtype=np.int64)
-        ntri = np.zeros(15, dtype=np.int64)
-        for c in _PLAIN:
-            a = _lewiner._to_array(getattr(_luts, f"TILING{c}"))
-            til[c, :a.shape[0], :a.shape[1]] = a
-            ntri[c] = a.shape[1] // 3
-        xyz = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)]
-        corner = np.array([(z, y, x) for x, y, z in xyz], dtype=np.int64)
-        ex, ey, ez = _lewiner.EDGETORELATIVEPOSX, _lewiner.EDGETORELATIVEPOSY, _lewiner.EDGETORELATIVEPOSZ
-        ends = np.stack([ez, ey, ex], axis=-1).astype(np.int64)  # (12 edges, 2 ends, (i, j, k))
-        edge_lo = ends.min(axis=1)
-        edge_axis = np.argmax(ends[:, 1] != ends[:, 0], axis=1).astype(np.int64)
-        _TABLES.update(cases=_lewiner._to_array(_luts.CASES).astype(np.int64), til=til, ntri=ntri,
-                       corner=corner, edge_lo=edge_lo, edge_axis=edge_axis)
-    return _TABLES
-
-
-@numba.njit(cache=True)
-def _grow(a, n):
-    """``a`` with room for at least ``n`` rows (doubling)."""
-    if n <= a.shape[0]:
-        return a
-    shape = (max(n, 2 * a.shape[0]),) + a.shape[1:]
-    b = np.empty(shape, dtype=a.dtype)
-    b[:a.shape[0]] = a
-    return b
-
-
-# (error_model numpy: no ZeroDivisionError check; a crossing edge has v0 > 0 >= v1 or the reverse.)
-@numba.njit(cache=True, error_model="numpy")
-def _plain_runs(flat, runs, ny, nz, delta, cases, til, ntri, corner, edge_lo, edge_axis):
-    """Lewiner's marching cubes on every run whose crossing cubes are all plain cases:
-    the triangles scikit-image emits (same tables, same traversal, same winding,
-    vertex positions and keys as :func:`_run_keys`), vertices numbered on first use.
-
-    ``runs[r] = (base, si, sj, sx, sy, sz, oi, oj, ok, i0, i1, j0, j1)``: the run's
-    value at ``(i, j, k)`` is ``flat[base + i si + j sj + k]``, its grid origin is
-    ``(oi, oj, ok)``, its tile ``(i0, i1, j0, j1)``. Returns ``(g, keys, share, faces,
-    declined)``: the runs with a cube of another case (face and interior tests) are
-    rolled back and listed in ``declined``, for scikit-image.
-    """
-    vmax = 0
-    for r in range(runs.shape[0]):
-        vmax = max(vmax, runs[r, 3] * runs[r, 4] * runs[r, 5])
-    table = np.full(vmax * 4, -1, dtype=np.int32)
-    g = np.empty((1 << 16, 3), dtype=np.float32)
-    keys = np.empty(1 << 16, dtype=np.int64)
-    share = np.empty(1 << 16, dtype=np.bool_)
-    faces = np.empty((1 << 17, 3), dtype=np.int32)
-    declined = np.empty(runs.shape[0], dtype=np.int64)
-    touched = np.empty(1 << 16, dtype=np.int64)
-    nv, nf, nd, nt = 0, 0, 0, 0
-    p = np.empty(3, dtype=np.int64)
-    tri = np.empty(3, dtype=np.int64)
-    # Cube index from the sign codes of its two horizontal faces: a face's code at
-    # level k has bit 2 di + dj for corner (di, dj); ``pair[lo, hi]`` is Lewiner's index.
-    pair = np.zeros((16, 16), dtype=np.int64)
-    for lo in range(16):
-        for hi in range(16):
-            for c in range(8):
-                q = hi if corner[c, 2] else lo
-                if (q >> (2 * corner[c, 0] + corner[c, 1])) & 1:
-                    pair[lo, hi] |= 1 << c
-    for r in range(runs.shape[0]):
-        base, si, sj, sx, sy, sz = runs[r, 0], runs[r, 1], runs[r, 2], runs[r, 3], runs[r, 4], runs[r, 5]
-        oi, oj, ok, i0, i1, j0, j1 = runs[r, 6], runs[r, 7], runs[r, 8], runs[r, 9], runs[r, 10], runs[r, 11], runs[r, 12]
-        nv0, nf0 = nv, nf
-        fail = False
-        for i in range(sx - 1):
-            for j in range(sy - 1):
-                b00 = base + i * si + j * sj
-                b01, b10 = b00 + sj, b00 + si
-                b11 = b10 + sj
-                nxt = (flat[b00] > 0) | ((flat[b01] > 0) << 1) | ((flat[b10] > 0) << 2) | ((flat[b11] > 0) << 3)
-                # Room for this column of cubes (at most 12 vertices, 4 faces a cube).
-                if nv + 12 * sz > g.shape[0]:
-                    g = _grow(g, nv + 12 * sz)
-                    keys = _grow(keys, nv + 12 * sz)
-                    share = _grow(share, nv + 12 * sz)
-                if nf + 4 * sz > faces.shape[0]:
-                    faces = _grow(faces, nf + 4 * sz)
-                if nt + 24 * sz > touched.shape[0]:
-                    touched = _grow(touched, nt + 24 * sz)
-                for k in range(sz - 1):
-                    cur = nxt
-                    nxt = ((flat[b00 + k + 1] > 0) | ((flat[b01 + k + 1] > 0) << 1) | ((flat[b10 + k + 1] > 0) << 2)
-                           | ((flat[b11 + k + 1] > 0) << 3))
-                    idx = pair[cur, nxt]
-                    if idx == 0 or idx == 255:
-                        continue
-                    case = cases[idx, 0]
-                    if case == 0:
-                        continue
-                    if ntri[case] == 0:
-                        fail = True
-                        break
-                    cfg = cases[idx, 1]
-                    for t3 in range(3 * ntri[case]):
-                        e = til[case, cfg, t3]
-                        a = edge_axis[e]
-                        p[0], p[1], p[2] = i + edge_lo[e, 0], j + edge_lo[e, 1], k + edge_lo[e, 2]
-                        # An edge's slot holds its vertex (or the grid point's it snapped to).
-                        slot = ((p[0] * sy + p[1]) * sz + p[2]) * 4 + a
-                        if table[slot] < 0:
-                            touched[nt] = slot
-                            nt += 1
-                            q0 = base + p[0] * si + p[1] * sj + p[2]
-                            v0 = np.float64(flat[q0])
-                            v1 = np.float64(flat[q0 + (si if a == 0 else sj if a == 1 else 1)])
-                            t = v0 / (v0 - v1)
-                            axis = a
-                            vslot = slot
-                            if t < 0.5 * delta or t > 1.0 - 0.5 * delta:  # at a grid point
-                                axis = 3
-                                if t > 0.5:
-                                    p[a] += 1
-                                vslot = ((p[0] * sy + p[1]) * sz + p[2]) * 4 + 3
-                            if table[vslot] < 0:
-                                table[vslot] = nv - nv0
-                                if vslot != slot:
-                                    touched[nt] = vslot
-                                    nt += 1
-                                gi, gj, gk = p[0] + oi, p[1] + oj, p[2] + ok
-                                g[nv, 0], g[nv, 1], g[nv, 2] = gi, gj, gk
-                                if axis < 3:
-                                    g[nv, axis] = np.float32(np.float64(g[nv, axis]) + t)
-                                keys[nv] = ((gi * ny + gj) * nz + gk) * 4 + axis
-                                # Deduplicated within the run: only the tile's side faces are shared.
-                                share[nv] = ((axis != 0 and (gi == i0 or gi == i1))
-                                             or (axis != 1 and (gj == j0 or gj == j1)))
-                                nv += 1
-                            table[slot] = table[vslot]
-                        tri[t3 % 3] = nv0 + table[slot]
-                        if t3 % 3 == 2:
-                            # scikit-image's winding ("descent" reverses Lewiner's order)
-                            faces[nf, 0], faces[nf, 1], faces[nf, 2] = tri[2], tri[1], tri[0]
-                            nf += 1
-                if fail:
-                    break
-            if fail:
-                break
-        for q in range(nt):
-            table[touched[q]] = -1
-        nt = 0
-        if fail:
-            nv, nf = nv0, nf0
-            declined[nd] = r
-            nd += 1
-    return g[:nv], keys[:nv], share[:nv], faces[:nf], declined[:nd]
-
-
-def _plain_run(vol, origin, box, ny, nz, delta, *luts):
-    """:func:`_plain_runs` on one ``(sx, sy, sz)`` array: ``(ok, g, keys, share, faces)``."""
-    vol = np.ascontiguousarray(vol, dtype=np.float32)
-    sx, sy, sz = vol.shape
-    run = np.array([[0, sy * sz, sz, sx, sy, sz, *origin, *box]], dtype=np.int64)
-    g, keys, share, faces, declined = _plain_runs(vol.reshape(-1), run, ny, nz, delta, *luts)
-    return len(declined) == 0, g, keys, share, faces
-
-
 def mesh_runs(node, flat, runs, shape, lo, voxel, normals=True) -> TriangleMesh:
     """Stitched marching-cubes mesh of ``runs`` (see module docstring).
 
@@ -349,7 +177,7 @@ def mesh_runs(node, flat, runs, shape, lo, voxel, normals=True) -> TriangleMesh:
         1-D float32 values the runs index.
     runs : numpy.ndarray
         ``(R, 13)`` rows ``(base, si, sj, sx, sy, sz, oi, oj, ok, i0, i1, j0, j1)`` in
-        tile order, then increasing ``ok`` (see :func:`_plain_runs`).
+        tile order, then increasing ``ok`` (see :func:`arches_render.mesh.lewiner.plain_runs`).
     shape, lo, voxel
         The grid.
     normals : bool
@@ -357,9 +185,8 @@ def mesh_runs(node, flat, runs, shape, lo, voxel, normals=True) -> TriangleMesh:
         scikit-image's winding.
     """
     ny, nz = int(shape[1]), int(shape[2])
-    T = _tables()
-    luts = (T["cases"], T["til"], T["ntri"], T["corner"], T["edge_lo"], T["edge_axis"])
-    g, keys, share, f, declined = _plain_runs(flat, runs, ny, nz, DELTA, *luts)
+    # The plain cases compiled (arches_render.mesh.lewiner), keyed positions at level 0.
+    g, keys, share, f, _, declined = plain_runs(flat, runs, ny, nz, DELTA, 0.0, 1, False, *lewiner_luts())
     verts, faces, keyl, shares, nv = [g], [f], [keys], [share], len(g)
     # The runs with face or interior tests, through scikit-image (after the plain
     # ones: the same order for the banded and the dense mesh).
