@@ -14,7 +14,7 @@ from arches_render.generators.rocks.anisotropic_voronoi import CellIndex, vorono
 from arches_render.generators.rocks.contact_points import adjacent_label_pairs, bisect_contacts
 from arches_render.generators.rocks.damped_erosion import damping_field, damping_piecewise, erode
 from arches_render.generators.rocks.periodic_tile import build_periodic_tile, poisson_points
-from arches_render.generators.rocks.rock_meshes import closed_oriented
+from arches_render.generators.rocks.rock_meshes import closed_oriented, mesh_rock
 from arches_render.generators.rocks.seed_points import SeedParams, anisotropic_distance, cell_seeds
 from arches_render.generators.rocks.tile_cache import cache_key
 from arches_render.generators.rocks.tile_params import ErosionParams, TileParams
@@ -314,3 +314,41 @@ def test_periodic_tile_is_a_closed_periodic_packing():
     P = store.meta["cells_per_period"]
     out = [np.any((store.rock(i)[0] < 0) | (store.rock(i)[0] > P)) for i in range(len(store))]
     assert any(out)
+
+
+# ----------------------------------------------------------------------------- coarse meshes
+def test_a_rock_smaller_than_the_mesh_step_is_meshed_finer():
+    """mesh_step 2 or 3 once raised scikit-image's "No surface found" on a rock whose
+    voxels above 1/2 all fall between the step's samples (n = 6, seed 9, smoothing 1.5:
+    68 rocks at step 2, 205 at step 3). Such a rock is meshed at the next finer step
+    that sees it: a coarse step trades triangles, it does not take rocks out of a pile."""
+    field = np.zeros((12, 12, 12), np.float32)
+    field[5, 5, 5] = 0.9
+    for axis in range(3):
+        for d in (-1, 1):
+            idx = [5, 5, 5]
+            idx[axis] += d
+            field[tuple(idx)] = 0.3
+    assert field[::2, ::2, ::2].max() == 0 and field[::3, ::3, ::3].max() == 0
+    fine = mesh_rock(field.copy(), (0, 0, 0), 8, 1)
+    assert fine is not None and closed_oriented(fine[1])
+    for step in (2, 3):
+        mesh = mesh_rock(field.copy(), (0, 0, 0), 8, step)
+        assert mesh is not None
+        for a, b in zip(mesh, fine):
+            assert np.array_equal(a, b)
+
+
+def test_coarse_steps_keep_every_rock_of_a_region():
+    """The region that first failed at step 2 (n = 6, seed 9, smoothing 1.5): at steps 2
+    and 3 it builds, with a closed mesh for every rock of step 1, and fewer triangles."""
+    base = dict(n=6, seed=9, erosion=ErosionParams(smoothing=1.5))
+    mask, code = cc.regions()[20]
+    rocks = {s: at.build_region(mask, code, TileParams(**base, mesh_step=s), 20) for s in (1, 2, 3)}
+    uids = [r["uid"] for r in rocks[1]]
+    assert len(uids) > 10
+    tris = {s: sum(len(r["faces"]) for r in rocks[s]) for s in rocks}
+    for s in (2, 3):
+        assert [r["uid"] for r in rocks[s]] == uids
+        assert all(closed_oriented(r["faces"]) for r in rocks[s])
+    assert tris[3] < tris[2] < tris[1] / 2

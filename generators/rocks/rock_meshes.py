@@ -3,7 +3,8 @@
 The paper defines each rock's field at the voxel centres as ``r = 2 rho - 1``
 (``rho = 0`` outside the rock), interpolates it trilinearly and polygonizes
 ``r = 0`` with marching cubes. We do the same on ``rho`` at level ``1/2``
-(scikit-image's Lewiner marching cubes), after a small Gaussian low-pass of
+(Lewiner's marching cubes: scikit-image's, bit for bit, its plain cases and case 3
+compiled in :mod:`arches_render.mesh.lewiner`), after a small Gaussian low-pass of
 ``rho`` (``sigma`` voxels, 0 disables it). The paper's field is binary on the
 uneroded contact faces, where marching cubes leaves voxel staircases; the
 low-pass removes them. It keeps rocks apart: the filter is linear and
@@ -27,6 +28,8 @@ import numba
 import numpy as np
 from scipy import sparse
 from scipy.sparse import csgraph
+
+from arches_render.mesh.lewiner import plain_volume
 
 __all__ = ["mesh_rock", "rock_field", "field_padding", "blur_weights", "blur_field", "closed_oriented", "mesh_volume",
            "keep_largest_component", "anchor_voxels", "bounding_radius"]
@@ -312,37 +315,30 @@ def field_padding(sigma: float, step: int) -> int:
     return len(blur_weights(sigma)) // 2 + step
 
 
-def mesh_rock(field: np.ndarray, origin, V: int, step: int = 1):
-    """Closed triangle mesh of one rock's field (from :func:`rock_field`).
+def _marching_cubes(field: np.ndarray, step: int):
+    """scikit-image's ``marching_cubes(field, 0.5, step_size=step, allow_degenerate=False)``,
+    bit for bit, or ``None`` where its grid holds no surface ("No surface found").
 
-    Parameters
-    ----------
-    field : (a, b, c) float32
-        The rock's low-passed ``rho``, zero on the box border.
-    origin : (3,) int
-        Global index of voxel ``[0, 0, 0]`` of ``field``.
-    V : int
-        Voxels per cell; output coordinates are in cells, voxel ``i``'s centre
-        at ``(i + 0.5) / V``.
-    step : int
-        Marching-cubes step in voxels (1: full resolution).
-
-    Returns
-    -------
-    (vertices, faces, normals) or None
-        float32 ``(P, 3)`` vertices in cell units, int32 ``(F, 3)`` faces with
-        outward winding, float32 unit normals; ``None`` when nothing of the rock
-        is left or the surface is not a closed oriented mesh.
-
-    References
-    ----------
-    Peytavie et al. 2009, section 5; Lorensen and Cline 1987; Lewiner et al. 2003.
+    The compiled plain cases (:mod:`arches_render.mesh.lewiner`) give the same
+    vertices, faces and normals; a rock with a cube they decline (ambiguous cases
+    other than 3, a degenerate face) goes to scikit-image itself.
     """
-    from skimage.measure import marching_cubes
-    # A value exactly at the level makes zero-area triangles; nudge it off.
-    if _nudged_max(field) <= 0.5:
+    vol = field if step == 1 else np.ascontiguousarray(field[::step, ::step, ::step])
+    ok, verts, _, _, faces, normals = plain_volume(vol, 0.5, step)
+    if not ok:
+        from skimage.measure import marching_cubes
+        try:
+            verts, faces, normals, _ = marching_cubes(field, 0.5, step_size=step, allow_degenerate=False)
+        except RuntimeError:  # no crossing cube on the step's grid
+            return None
+    return (verts, faces, normals) if len(faces) else None
+
+
+def _closed_mesh(field, origin, V, step):
+    mc = _marching_cubes(field, step)
+    if mc is None:
         return None
-    verts, faces, normals, _ = marching_cubes(field, 0.5, step_size=step, allow_degenerate=False)
+    verts, faces, normals = mc
     if len(faces) < 8:
         return None
     # Euler characteristic V - F/2 of a closed mesh is 2 per sphere-like component;
@@ -352,3 +348,44 @@ def mesh_rock(field: np.ndarray, origin, V: int, step: int = 1):
     # Winding kept outward whatever the library's convention.
     ok, x, faces, nrm = _outward_cells(verts, faces, normals, np.asarray(origin, np.float64), int(V))
     return (x, faces, nrm) if ok else None
+
+
+def mesh_rock(field: np.ndarray, origin, V: int, step: int = 1):
+    """Closed triangle mesh of one rock's field (from :func:`rock_field`).
+
+    Parameters
+    ----------
+    field : (a, b, c) float32
+        The rock's low-passed ``rho``, zero on the box border. Values exactly
+        ``1/2`` are moved off the level in place.
+    origin : (3,) int
+        Global index of voxel ``[0, 0, 0]`` of ``field``.
+    V : int
+        Voxels per cell; output coordinates are in cells, voxel ``i``'s centre
+        at ``(i + 0.5) / V``.
+    step : int
+        Marching-cubes step in voxels (1: full resolution). A rock whose mesh at
+        this step is missing or not closed (one smaller than the step's grid:
+        the grid holds no surface, or a sliver of it) is meshed at the next finer
+        step, down to 1: a coarser step trades triangles for time, it does not
+        remove rocks from the pile (their neighbours' contacts expect them).
+
+    Returns
+    -------
+    (vertices, faces, normals) or None
+        float32 ``(P, 3)`` vertices in cell units, int32 ``(F, 3)`` faces with
+        outward winding, float32 unit normals; ``None`` when nothing of the rock
+        is left (no voxel above ``1/2``) or no step gives a closed oriented mesh.
+
+    References
+    ----------
+    Peytavie et al. 2009, section 5; Lorensen and Cline 1987; Lewiner et al. 2003.
+    """
+    # A value exactly at the level makes zero-area triangles; nudge it off.
+    if _nudged_max(field) <= 0.5:
+        return None
+    for s in range(int(step), 0, -1):
+        mesh = _closed_mesh(field, origin, V, s)
+        if mesh is not None:
+            return mesh
+    return None

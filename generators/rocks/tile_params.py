@@ -79,7 +79,8 @@ class TileParams:
     anchors : int
         Anchor voxels stored per rock (plus its seed) for instancing.
     mesh_step : int
-        Marching-cubes step in voxels.
+        Marching-cubes step in voxels. A rock too small for the step's grid is
+        meshed at the next finer step that sees it (``rock_meshes.mesh_rock``).
     """
 
     tiling: str = "aperiodic"
