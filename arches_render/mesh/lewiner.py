@@ -53,7 +53,8 @@ def lewiner_tables() -> dict:
         (0: not plain); ``corner (8, 3)`` offsets of scikit-image's cell corners
         ``v0 .. v7``; ``edge_lo (12, 3)`` lower ends and ``edge_axis (12,)`` axes of
         the edges; ``ends (12, 2, 3)`` the edges' two ends in scikit-image's order;
-        ``til3 (2, 24, 12)`` case 3's tilings 3.1 and 3.2 and ``test3 (24,)`` its face tests.
+        ``til3 (2, 24, 12)`` case 3's tilings 3.1 and 3.2 and ``test3 (24,)`` its face tests;
+        ``pair (16, 16)`` a cube's index from its lower and upper faces' sign codes.
         All in array axes ``(i, j, k)`` (Lewiner's ``x, y, z`` are axes 2, 1, 0).
     """
     if not _TABLES:
@@ -73,7 +74,16 @@ def lewiner_tables() -> dict:
         til3 = np.zeros((2, 24, 12), dtype=np.int64)
         til3[0, :, :6] = _lewiner._to_array(_luts.TILING3_1)
         til3[1] = _lewiner._to_array(_luts.TILING3_2)
-        _TABLES.update(cases=_lewiner._to_array(_luts.CASES).astype(np.int64), til=til, ntri=ntri,
+        # Cube index from the sign codes of its two horizontal faces: a face's code at
+        # level k has bit 2 di + dj for corner (di, dj); ``pair[lo, hi]`` is Lewiner's index.
+        pair = np.zeros((16, 16), dtype=np.int64)
+        for lo in range(16):
+            for hi in range(16):
+                for c in range(8):
+                    q = hi if corner[c, 2] else lo
+                    if (q >> (2 * corner[c, 0] + corner[c, 1])) & 1:
+                        pair[lo, hi] |= 1 << c
+        _TABLES.update(pair=pair, cases=_lewiner._to_array(_luts.CASES).astype(np.int64), til=til, ntri=ntri,
                        corner=corner, edge_lo=edge_lo, edge_axis=edge_axis, ends=ends, til3=til3,
                        test3=_lewiner._to_array(_luts.TEST3).astype(np.int64))
     return _TABLES
@@ -83,7 +93,7 @@ def lewiner_luts() -> tuple:
     """:func:`lewiner_tables` in :func:`plain_runs`'s argument order."""
     T = lewiner_tables()
     return (T["cases"], T["til"], T["ntri"], T["corner"], T["edge_lo"], T["edge_axis"], T["ends"], T["til3"],
-            T["test3"])
+            T["test3"], T["pair"])
 
 
 @numba.njit(cache=True, nogil=True)
@@ -116,10 +126,49 @@ def _corner_gradients(vc, vg):
     vg[7, 0], vg[7, 1], vg[7, 2] = v7 - v6, v4 - v7, v3 - v7
 
 
+@numba.njit(cache=True, nogil=True)
+def _column_spans(flat, base, si, sj, sx, sy, sz, level, span):
+    """Per column ``(i, j)`` of a run (row ``i sy + j``): the first and last ``k``
+    inside (``> level``) and the first and last outside; ``sz`` and -1 when none.
+    A column of one sign is read once; one of both, from each end to its last change."""
+    for i in range(sx):
+        for j in range(sy):
+            b = base + i * si + j * sj
+            c = i * sy + j
+            bottom = flat[b] > level
+            change = sz
+            for k in range(1, sz):
+                if (flat[b + k] > level) != bottom:
+                    change = k
+                    break
+            if change == sz:  # one sign: first 0, last sz - 1; none of the other
+                if bottom:
+                    span[c, 0], span[c, 1], span[c, 2], span[c, 3] = 0, sz - 1, sz, -1
+                else:
+                    span[c, 0], span[c, 1], span[c, 2], span[c, 3] = sz, -1, 0, sz - 1
+                continue
+            top = flat[b + sz - 1] > level
+            last = 0
+            for k in range(sz - 2, -1, -1):
+                if (flat[b + k] > level) != top:
+                    last = k
+                    break
+            # The first of the bottom's sign is 0, of the other ``change``; the last of
+            # the top's sign is sz - 1, of the other ``last``.
+            if bottom:
+                span[c, 0], span[c, 2] = 0, change
+            else:
+                span[c, 0], span[c, 2] = change, 0
+            if top:
+                span[c, 1], span[c, 3] = sz - 1, last
+            else:
+                span[c, 1], span[c, 3] = last, sz - 1
+
+
 # (error_model numpy: no ZeroDivisionError check; a crossing edge has v0 > 0 >= v1 or the reverse.)
 @numba.njit(cache=True, error_model="numpy", nogil=True)
 def plain_runs(flat, runs, ny, nz, delta, level, step, exact, cases, til, ntri, corner, edge_lo, edge_axis, ends,
-               til3, test3):
+               til3, test3, pair):
     """Lewiner's marching cubes on every run whose crossing cubes are all plain cases.
 
     Parameters
@@ -142,7 +191,7 @@ def plain_runs(flat, runs, ny, nz, delta, level, step, exact, cases, til, ntri, 
     exact : bool
         scikit-image's vertex positions and normals (see module docstring) instead
         of the terrain's keyed positions.
-    cases, til, ntri, corner, edge_lo, edge_axis, ends, til3, test3
+    cases, til, ntri, corner, edge_lo, edge_axis, ends, til3, test3, pair
         :func:`lewiner_tables`.
 
     Returns
@@ -154,9 +203,11 @@ def plain_runs(flat, runs, ny, nz, delta, level, step, exact, cases, til, ntri, 
         float32 ``(P, 3)`` unit normals (``exact``; else ``(0, 3)``), and the
         indices of the runs rolled back for scikit-image.
     """
-    vmax = 0
+    vmax, cmax = 0, 0
     for r in range(runs.shape[0]):
         vmax = max(vmax, runs[r, 3] * runs[r, 4] * runs[r, 5])
+        cmax = max(cmax, runs[r, 3] * runs[r, 4])
+    span = np.empty((cmax, 4), dtype=np.int64)
     table = np.full(vmax * 4, -1, dtype=np.int32)
     cap = min(1 << 16, max(256, vmax // 8))  # (output does not depend on it)
     g = np.empty((cap, 3), dtype=np.float32)
@@ -171,29 +222,35 @@ def plain_runs(flat, runs, ny, nz, delta, level, step, exact, cases, til, ntri, 
     tri = np.empty(3, dtype=np.int64)
     vc = np.empty(8, dtype=np.float64)
     vg = np.empty((8, 3), dtype=np.float64)
+    w = np.empty(8, dtype=np.float64)   # corner weights by bit index, and as float32
+    w32 = np.empty(8, dtype=np.float64)
+    cb = np.empty(3, dtype=np.float64)
     stp = np.float64(step)
-    # Cube index from the sign codes of its two horizontal faces: a face's code at
-    # level k has bit 2 di + dj for corner (di, dj); ``pair[lo, hi]`` is Lewiner's index.
-    pair = np.zeros((16, 16), dtype=np.int64)
-    for lo in range(16):
-        for hi in range(16):
-            for c in range(8):
-                q = hi if corner[c, 2] else lo
-                if (q >> (2 * corner[c, 0] + corner[c, 1])) & 1:
-                    pair[lo, hi] |= 1 << c
     for r in range(runs.shape[0]):
         base, si, sj, sx, sy, sz = runs[r, 0], runs[r, 1], runs[r, 2], runs[r, 3], runs[r, 4], runs[r, 5]
         oi, oj, ok, i0, i1, j0, j1 = runs[r, 6], runs[r, 7], runs[r, 8], runs[r, 9], runs[r, 10], runs[r, 11], runs[r, 12]
         nv0, nf0 = nv, nf
         fail = False
+        _column_spans(flat, base, si, sj, sx, sy, sz, level, span)
         for i in range(sx - 1):
             for j in range(sy - 1):
+                # Only the layers where the four columns hold both an inside and an outside
+                # corner can cross; the others emit nothing (a shortcut, same output).
+                c00, c01 = i * sy + j, i * sy + j + 1
+                c10, c11 = c00 + sy, c01 + sy
+                k0 = max(min(span[c00, 0], span[c01, 0], span[c10, 0], span[c11, 0]),
+                         min(span[c00, 2], span[c01, 2], span[c10, 2], span[c11, 2])) - 1
+                k1 = min(max(span[c00, 1], span[c01, 1], span[c10, 1], span[c11, 1]),
+                         max(span[c00, 3], span[c01, 3], span[c10, 3], span[c11, 3]), sz - 2)
+                k0 = max(k0, 0)
+                if k0 > k1:
+                    continue
                 b00 = base + i * si + j * sj
                 b01, b10 = b00 + sj, b00 + si
                 b11 = b10 + sj
                 # (v - level > 0 in double is v > level: an IEEE difference is 0 only for equal values)
-                nxt = ((flat[b00] > level) | ((flat[b01] > level) << 1) | ((flat[b10] > level) << 2)
-                       | ((flat[b11] > level) << 3))
+                nxt = ((flat[b00 + k0] > level) | ((flat[b01 + k0] > level) << 1) | ((flat[b10 + k0] > level) << 2)
+                       | ((flat[b11 + k0] > level) << 3))
                 # Room for this column of cubes (at most 12 vertices, 4 faces a cube).
                 if nv + 12 * sz > g.shape[0]:
                     g = _grow(g, nv + 12 * sz)
@@ -205,7 +262,7 @@ def plain_runs(flat, runs, ny, nz, delta, level, step, exact, cases, til, ntri, 
                     faces = _grow(faces, nf + 4 * sz)
                 if nt + 24 * sz > touched.shape[0]:
                     touched = _grow(touched, nt + 24 * sz)
-                for k in range(sz - 1):
+                for k in range(k0, k1 + 1):
                     cur = nxt
                     nxt = ((flat[b00 + k + 1] > level) | ((flat[b01 + k + 1] > level) << 1)
                            | ((flat[b10 + k + 1] > level) << 2) | ((flat[b11 + k + 1] > level) << 3))
@@ -224,6 +281,12 @@ def plain_runs(flat, runs, ny, nz, delta, level, step, exact, cases, til, ntri, 
                         for c in range(8):
                             vc[c] = np.float64(flat[b00 + corner[c, 0] * si + corner[c, 1] * sj + k + corner[c, 2]]) - level
                         _corner_gradients(vc, vg)
+                        # scikit-image's weights 1 / (eps + |v|) of the corners, by bit index
+                        # (its ``vv``), and the float32 it passes them as to add_gradient.
+                        for b in range(8):
+                            w[b] = 1.0 / (_EPS + abs(vc[_BIT_TO_V[b]]))
+                            w32[b] = np.float64(np.float32(w[b]))
+                        cb[0], cb[1], cb[2] = np.float64(i * step), np.float64(j * step), np.float64(k * step)
                         if case == 3:
                             if _test_face(vc, test3[cfg]):
                                 row, n3 = til3[1, cfg], 12
@@ -240,8 +303,7 @@ def plain_runs(flat, runs, ny, nz, delta, level, step, exact, cases, til, ntri, 
                             # 1 / (eps + |v|), in the edge's table order (its sums' order).
                             c1 = ends[e, 0, 0] * 4 + ends[e, 0, 1] * 2 + ends[e, 0, 2]  # bit 4 dz + 2 dy + dx
                             c2 = ends[e, 1, 0] * 4 + ends[e, 1, 1] * 2 + ends[e, 1, 2]
-                            w1 = 1.0 / (_EPS + abs(vc[_BIT_TO_V[c1]]))
-                            w2 = 1.0 / (_EPS + abs(vc[_BIT_TO_V[c2]]))
+                            w1, w2 = w[c1], w[c2]
                             if table[slot] < 0:
                                 table[slot] = nv - nv0
                                 touched[nt] = slot
@@ -253,13 +315,13 @@ def plain_runs(flat, runs, ny, nz, delta, level, step, exact, cases, til, ntri, 
                                     fa = 0.0
                                     fa += ends[e, 0, ax] * w1
                                     fa += ends[e, 1, ax] * w2
-                                    g[nv, ax] = np.float32(np.float64((i, j, k)[ax] * step) + stp * fa / ff)
+                                    g[nv, ax] = np.float32(cb[ax] + stp * fa / ff)
                                 acc[nv, 0], acc[nv, 1], acc[nv, 2] = 0.0, 0.0, 0.0
                                 keys[nv] = -1
                                 share[nv] = False
                                 nv += 1
                             q = nv0 + table[slot]
-                            s1, s2 = np.float64(np.float32(w1)), np.float64(np.float32(w2))
+                            s1, s2 = w32[c1], w32[c2]
                             for ax in range(3):
                                 acc[q, ax] += np.float32(vg[c1, ax] * s1)
                             for ax in range(3):
