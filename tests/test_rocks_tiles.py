@@ -236,6 +236,30 @@ def test_every_rock_is_a_closed_manifold(cube_rocks):
     assert not trimesh.Trimesh(rocks[0]["vertices"], bad, process=False).is_watertight
 
 
+def test_closed_oriented_agrees_with_trimesh_on_broken_meshes(cube_rocks):
+    """closed_oriented is trimesh's ``is_watertight and is_winding_consistent`` on rock
+    meshes broken five ways: a face removed, one flipped, one repeated, a fin of two
+    opposite faces on an edge (four faces there), and a degenerate face."""
+    import trimesh
+    _, rocks = cube_rocks
+    rng = np.random.default_rng(5)
+    seen = {True: 0, False: 0}
+    for r in rocks[:40]:
+        f = r["faces"]
+        i = int(rng.integers(len(f)))
+        broken = [f, np.delete(f, i, axis=0), np.concatenate([f[:i], f[i:i + 1, ::-1], f[i + 1:]]),
+                  np.concatenate([f, f[i:i + 1]]), np.concatenate([f, f[i:i + 1], f[i:i + 1, ::-1]])]
+        for g in broken:
+            m = trimesh.Trimesh(r["vertices"], g, process=False)
+            expected = bool(m.is_watertight and m.is_winding_consistent)
+            assert closed_oriented(g) == expected
+            seen[expected] += 1
+        degenerate = f.copy()
+        degenerate[i, 0] = degenerate[i, 1]
+        assert not closed_oriented(degenerate)
+    assert seen[True] == 40 and seen[False] == 160
+
+
 def test_rocks_do_not_interpenetrate(cube_rocks):
     """Vertices of a rock lie outside its neighbours but for a contact tolerance (0.25 voxel)."""
     import trimesh
