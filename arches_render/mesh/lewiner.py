@@ -1,4 +1,4 @@
-"""Lewiner's marching cubes on its plain cases, compiled: scikit-image's tables and traversal.
+"""Lewiner's marching cubes, compiled for most of its cases: scikit-image's tables and traversal.
 
 One kernel, :func:`plain_runs`, serves two callers that need different vertices:
 
@@ -14,11 +14,15 @@ One kernel, :func:`plain_runs`, serves two callers that need different vertices:
 
 Both walk the cubes as scikit-image does (array axis 0 outermost, axis 2
 innermost), number vertices on first use and wind faces as its default
-``gradient_direction='descent'``. A run holding a cube of a case with face or
-interior tests (3, 4, 6, 7, 10, 12, 13) is rolled back and *declined*: the
-caller hands it to scikit-image itself. ``exact`` runs are also declined when a
-face is degenerate (two corners at one position), which scikit-image's
-``allow_degenerate=False`` would remove with its vertex merging.
+``gradient_direction='descent'``. Lewiner's plain cases (fixed tilings) are
+compiled for both; ``exact`` runs also resolve cases 3, 4 and 6 by scikit-image's
+face and interior tests (all but tiling 6.1.2, which needs the cube's centre
+vertex). A run holding a cube of another case (terrain: 3, 4, 6, 7, 10, 12, 13;
+``exact``: 7, 10, 12, 13, 6.1.2) is rolled back and *declined*: the caller hands
+it to scikit-image itself. ``exact`` runs are also declined when a face is
+degenerate (two corners at one position), which scikit-image's
+``allow_degenerate=False`` would remove with its vertex merging. Of 785 n = 5
+rock fields that leaves none to scikit-image at step 1, 21 at step 2, 33 at 3.
 
 References
 ----------
@@ -38,13 +42,16 @@ __all__ = ["PLAIN", "lewiner_tables", "lewiner_luts", "plain_runs", "plain_volum
 
 #: Lewiner's cases whose tiling is a fixed table (no face or interior test).
 PLAIN = (1, 2, 5, 8, 9, 11, 14)
+#: The tilings of the ambiguous cases that ``exact`` runs resolve (3, 4 and 6), by number
+#: (6.1.2, number 5, is declined: it needs the cube's centre vertex).
+_AMBIGUOUS = ("TILING3_1", "TILING3_2", "TILING4_1", "TILING4_2", "TILING6_1_1", "TILING6_1_2", "TILING6_2")
 _TABLES = {}
 #: scikit-image's ``FLT_EPSILON`` (``np.spacing(1.0)``, a double's epsilon despite the name).
 _EPS = float(np.spacing(1.0))
 
 
 def lewiner_tables() -> dict:
-    """scikit-image's Lewiner tables for the plain cases, as arrays for numba.
+    """scikit-image's Lewiner tables for the compiled cases, as arrays for numba.
 
     Returns
     -------
@@ -53,7 +60,9 @@ def lewiner_tables() -> dict:
         (0: not plain); ``corner (8, 3)`` offsets of scikit-image's cell corners
         ``v0 .. v7``; ``edge_lo (12, 3)`` lower ends and ``edge_axis (12,)`` axes of
         the edges; ``ends (12, 2, 3)`` the edges' two ends in scikit-image's order;
-        ``til3 (2, 24, 12)`` case 3's tilings 3.1 and 3.2 and ``test3 (24,)`` its face tests;
+        ``amb_til (7, 48, 27)`` and ``amb_n (7,)`` the tilings 3.1, 3.2, 4.1, 4.2, 6.1.1,
+        6.1.2, 6.2 and their triangle counts, ``amb_test (3, 48, 3)`` the tests of cases
+        3, 4 and 6 (``exact`` runs resolve them as scikit-image does);
         ``pair (16, 16)`` a cube's index from its lower and upper faces' sign codes.
         All in array axes ``(i, j, k)`` (Lewiner's ``x, y, z`` are axes 2, 1, 0).
     """
@@ -70,10 +79,17 @@ def lewiner_tables() -> dict:
         ends = np.stack([ez, ey, ex], axis=-1).astype(np.int64)  # (12 edges, 2 ends, (i, j, k))
         edge_lo = ends.min(axis=1)
         edge_axis = np.argmax(ends[:, 1] != ends[:, 0], axis=1).astype(np.int64)
-        # Case 3 (``exact`` runs): one face test picks tiling 3.1 (2 triangles) or 3.2 (4).
-        til3 = np.zeros((2, 24, 12), dtype=np.int64)
-        til3[0, :, :6] = _lewiner._to_array(_luts.TILING3_1)
-        til3[1] = _lewiner._to_array(_luts.TILING3_2)
+        # Cases 3, 4, 6 (``exact`` runs): the tests pick one of these tilings.
+        amb_til = np.zeros((len(_AMBIGUOUS), 48, 27), dtype=np.int64)
+        amb_n = np.zeros(len(_AMBIGUOUS), dtype=np.int64)
+        for t, name in enumerate(_AMBIGUOUS):
+            a = _lewiner._to_array(getattr(_luts, name))
+            amb_til[t, :a.shape[0], :a.shape[1]] = a
+            amb_n[t] = a.shape[1] // 3
+        amb_test = np.zeros((3, 48, 3), dtype=np.int64)
+        amb_test[0, :24, 0] = _lewiner._to_array(_luts.TEST3)
+        amb_test[1, :8, 0] = _lewiner._to_array(_luts.TEST4)
+        amb_test[2] = _lewiner._to_array(_luts.TEST6)
         # Cube index from the sign codes of its two horizontal faces: a face's code at
         # level k has bit 2 di + dj for corner (di, dj); ``pair[lo, hi]`` is Lewiner's index.
         pair = np.zeros((16, 16), dtype=np.int64)
@@ -84,16 +100,16 @@ def lewiner_tables() -> dict:
                     if (q >> (2 * corner[c, 0] + corner[c, 1])) & 1:
                         pair[lo, hi] |= 1 << c
         _TABLES.update(pair=pair, cases=_lewiner._to_array(_luts.CASES).astype(np.int64), til=til, ntri=ntri,
-                       corner=corner, edge_lo=edge_lo, edge_axis=edge_axis, ends=ends, til3=til3,
-                       test3=_lewiner._to_array(_luts.TEST3).astype(np.int64))
+                       corner=corner, edge_lo=edge_lo, edge_axis=edge_axis, ends=ends, amb_til=amb_til,
+                       amb_n=amb_n, amb_test=amb_test)
     return _TABLES
 
 
 def lewiner_luts() -> tuple:
     """:func:`lewiner_tables` in :func:`plain_runs`'s argument order."""
     T = lewiner_tables()
-    return (T["cases"], T["til"], T["ntri"], T["corner"], T["edge_lo"], T["edge_axis"], T["ends"], T["til3"],
-            T["test3"], T["pair"])
+    return (T["cases"], T["til"], T["ntri"], T["corner"], T["edge_lo"], T["edge_axis"], T["ends"], T["amb_til"],
+            T["amb_n"], T["amb_test"], T["pair"])
 
 
 @numba.njit(cache=True, nogil=True)
@@ -168,8 +184,8 @@ def _column_spans(flat, base, si, sj, sx, sy, sz, level, span):
 # (error_model numpy: no ZeroDivisionError check; a crossing edge has v0 > 0 >= v1 or the reverse.)
 @numba.njit(cache=True, error_model="numpy", nogil=True)
 def plain_runs(flat, runs, ny, nz, delta, level, step, exact, cases, til, ntri, corner, edge_lo, edge_axis, ends,
-               til3, test3, pair):
-    """Lewiner's marching cubes on every run whose crossing cubes are all plain cases.
+               amb_til, amb_n, amb_test, pair):
+    """Lewiner's marching cubes on every run whose crossing cubes are all of cases it compiles.
 
     Parameters
     ----------
@@ -191,7 +207,7 @@ def plain_runs(flat, runs, ny, nz, delta, level, step, exact, cases, til, ntri, 
     exact : bool
         scikit-image's vertex positions and normals (see module docstring) instead
         of the terrain's keyed positions.
-    cases, til, ntri, corner, edge_lo, edge_axis, ends, til3, test3, pair
+    cases, til, ntri, corner, edge_lo, edge_axis, ends, amb_til, amb_n, amb_test, pair
         :func:`lewiner_tables`.
 
     Returns
@@ -272,7 +288,7 @@ def plain_runs(flat, runs, ny, nz, delta, level, step, exact, cases, til, ntri, 
                     case = cases[idx, 0]
                     if case == 0:
                         continue
-                    if ntri[case] == 0 and not (exact and case == 3):
+                    if ntri[case] == 0 and not (exact and (case == 3 or case == 4 or case == 6)):
                         fail = True
                         break
                     cfg = cases[idx, 1]
@@ -287,11 +303,12 @@ def plain_runs(flat, runs, ny, nz, delta, level, step, exact, cases, til, ntri, 
                             w[b] = 1.0 / (_EPS + abs(vc[_BIT_TO_V[b]]))
                             w32[b] = np.float64(np.float32(w[b]))
                         cb[0], cb[1], cb[2] = np.float64(i * step), np.float64(j * step), np.float64(k * step)
-                        if case == 3:
-                            if _test_face(vc, test3[cfg]):
-                                row, n3 = til3[1, cfg], 12
-                            else:
-                                row, n3 = til3[0, cfg], 6
+                        if case == 3 or case == 4 or case == 6:
+                            tv = _ambiguous_tiling(vc, case, cfg, amb_test)
+                            if tv < 0:
+                                fail = True
+                                break
+                            row, n3 = amb_til[tv, cfg], 3 * amb_n[tv]
                     for t3 in range(n3):
                         e = row[t3]
                         a = edge_axis[e]
@@ -415,6 +432,93 @@ def _test_face(vc, face):
     if -_EPS < ac_bd < _EPS:
         return face >= 0
     return np.float64(face) * A * ac_bd >= 0
+
+
+@numba.njit(cache=True, nogil=True)
+def _ambiguous_tiling(vc, case, cfg, amb_test):
+    """scikit-image's ``the_big_switch`` for cases 3, 4 and 6: the tiling's number in
+    ``_AMBIGUOUS``, or -1 for 6.1.2 (it needs the cube's centre vertex: left to
+    scikit-image; never chosen in 75,000 random case 6 cubes, so never tested here)."""
+    if case == 3:
+        return 1 if _test_face(vc, amb_test[0, cfg, 0]) else 0
+    if case == 4:
+        return 2 if _test_internal(vc, 4, -1, amb_test[1, cfg, 0]) else 3
+    if _test_face(vc, amb_test[2, cfg, 0]):
+        return 6
+    return 4 if _test_internal(vc, 6, amb_test[2, cfg, 2], amb_test[2, cfg, 1]) else -1
+
+
+@numba.njit(cache=True, nogil=True)
+def _test_internal(vc, case, edge, s):
+    """scikit-image's ``test_internal`` for cases 4 and 6 (``edge``: TEST6's reference
+    edge), on the cube values ``vc`` (``v0 .. v7``, level subtracted)."""
+    v0, v1, v2, v3, v4, v5, v6, v7 = vc[0], vc[1], vc[2], vc[3], vc[4], vc[5], vc[6], vc[7]
+    At, Bt, Ct, Dt = 0.0, 0.0, 0.0, 0.0
+    if case == 4:
+        a = (v4 - v0) * (v6 - v2) - (v7 - v3) * (v5 - v1)
+        b = v2 * (v4 - v0) + v0 * (v6 - v2) - v1 * (v7 - v3) - v3 * (v5 - v1)
+        t = -b / (2 * a + _EPS)
+        if t < 0 or t > 1:
+            return s > 0
+        At = v0 + (v4 - v0) * t
+        Bt = v3 + (v7 - v3) * t
+        Ct = v2 + (v6 - v2) * t
+        Dt = v1 + (v5 - v1) * t
+    else:
+        # (edge, its two ends, and the three edges parallel to it, as scikit-image lists them)
+        if edge == 0:
+            t = v0 / (v0 - v1 + _EPS)
+            Bt, Ct, Dt = v3 + (v2 - v3) * t, v7 + (v6 - v7) * t, v4 + (v5 - v4) * t
+        elif edge == 1:
+            t = v1 / (v1 - v2 + _EPS)
+            Bt, Ct, Dt = v0 + (v3 - v0) * t, v4 + (v7 - v4) * t, v5 + (v6 - v5) * t
+        elif edge == 2:
+            t = v2 / (v2 - v3 + _EPS)
+            Bt, Ct, Dt = v1 + (v0 - v1) * t, v5 + (v4 - v5) * t, v6 + (v7 - v6) * t
+        elif edge == 3:
+            t = v3 / (v3 - v0 + _EPS)
+            Bt, Ct, Dt = v2 + (v1 - v2) * t, v6 + (v5 - v6) * t, v7 + (v4 - v7) * t
+        elif edge == 4:
+            t = v4 / (v4 - v5 + _EPS)
+            Bt, Ct, Dt = v7 + (v6 - v7) * t, v3 + (v2 - v3) * t, v0 + (v1 - v0) * t
+        elif edge == 5:
+            t = v5 / (v5 - v6 + _EPS)
+            Bt, Ct, Dt = v4 + (v7 - v4) * t, v0 + (v3 - v0) * t, v1 + (v2 - v1) * t
+        elif edge == 6:
+            t = v6 / (v6 - v7 + _EPS)
+            Bt, Ct, Dt = v5 + (v4 - v5) * t, v1 + (v0 - v1) * t, v2 + (v3 - v2) * t
+        elif edge == 7:
+            t = v7 / (v7 - v4 + _EPS)
+            Bt, Ct, Dt = v6 + (v5 - v6) * t, v2 + (v1 - v2) * t, v3 + (v0 - v3) * t
+        elif edge == 8:
+            t = v0 / (v0 - v4 + _EPS)
+            Bt, Ct, Dt = v3 + (v7 - v3) * t, v2 + (v6 - v2) * t, v1 + (v5 - v1) * t
+        elif edge == 9:
+            t = v1 / (v1 - v5 + _EPS)
+            Bt, Ct, Dt = v0 + (v4 - v0) * t, v3 + (v7 - v3) * t, v2 + (v6 - v2) * t
+        elif edge == 10:
+            t = v2 / (v2 - v6 + _EPS)
+            Bt, Ct, Dt = v1 + (v5 - v1) * t, v0 + (v4 - v0) * t, v3 + (v7 - v3) * t
+        else:
+            t = v3 / (v3 - v7 + _EPS)
+            Bt, Ct, Dt = v2 + (v6 - v2) * t, v1 + (v5 - v1) * t, v0 + (v4 - v0) * t
+    test = 0
+    if At >= 0:
+        test += 1
+    if Bt >= 0:
+        test += 2
+    if Ct >= 0:
+        test += 4
+    if Dt >= 0:
+        test += 8
+    if test == 5:
+        # (scikit-image's port falls off its if-chain here, returning 0)
+        return s > 0 if At * Ct - Bt * Dt < _EPS else False
+    if test == 10:
+        return s > 0 if At * Ct - Bt * Dt >= _EPS else False
+    if test == 7 or test == 11 or test == 13 or test >= 14:
+        return s < 0
+    return s > 0
 
 
 @numba.njit(cache=True, nogil=True, inline="always")

@@ -3,8 +3,8 @@
 The paper defines each rock's field at the voxel centres as ``r = 2 rho - 1``
 (``rho = 0`` outside the rock), interpolates it trilinearly and polygonizes
 ``r = 0`` with marching cubes. We do the same on ``rho`` at level ``1/2``
-(Lewiner's marching cubes: scikit-image's, bit for bit, its plain cases and case 3
-compiled in :mod:`arches_render.mesh.lewiner`), after a small Gaussian low-pass of
+(Lewiner's marching cubes: scikit-image's, bit for bit, compiled in
+:mod:`arches_render.mesh.lewiner` but for a few ambiguous cases), after a small Gaussian low-pass of
 ``rho`` (``sigma`` voxels, 0 disables it). The paper's field is binary on the
 uneroded contact faces, where marching cubes leaves voxel staircases; the
 low-pass removes them. It keeps rocks apart: the filter is linear and
@@ -328,9 +328,9 @@ def _marching_cubes(field: np.ndarray, step: int):
     """scikit-image's ``marching_cubes(field, 0.5, step_size=step, allow_degenerate=False)``,
     bit for bit, or ``None`` where its grid holds no surface ("No surface found").
 
-    The compiled plain cases (:mod:`arches_render.mesh.lewiner`) give the same
-    vertices, faces and normals; a rock with a cube they decline (ambiguous cases
-    other than 3, a degenerate face) goes to scikit-image itself.
+    The compiled cases (:mod:`arches_render.mesh.lewiner`) give the same vertices,
+    faces and normals; a rock with a cube they decline (ambiguous cases 7, 10, 12,
+    13 or tiling 6.1.2, a degenerate face) goes to scikit-image itself.
     """
     vol = field if step == 1 else np.ascontiguousarray(field[::step, ::step, ::step])
     ok, verts, _, _, faces, normals = plain_volume(vol, 0.5, step)
