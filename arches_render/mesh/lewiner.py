@@ -295,7 +295,8 @@ def plain_runs(flat, runs, ny, nz, delta, level, step, exact, cases, til, ntri, 
                     row, n3 = til[case, cfg], 3 * ntri[case]
                     if exact:
                         for c in range(8):
-                            vc[c] = np.float64(flat[b00 + corner[c, 0] * si + corner[c, 1] * sj + k + corner[c, 2]]) - level
+                            q = b00 + corner[c, 0] * si + corner[c, 1] * sj + k + corner[c, 2]
+                            vc[c] = np.float64(flat[q]) - level
                         _corner_gradients(vc, vg)
                         # scikit-image's weights 1 / (eps + |v|) of the corners, by bit index
                         # (its ``vv``), and the float32 it passes them as to add_gradient.
