@@ -376,3 +376,30 @@ def test_coarse_steps_keep_every_rock_of_a_region():
         assert [r["uid"] for r in rocks[s]] == uids
         assert all(closed_oriented(r["faces"]) for r in rocks[s])
     assert tris[3] < tris[2] < tris[1] / 2
+
+
+def test_a_script_without_a_main_guard_gets_its_tiles_and_a_warning_not_a_hang(tmp_path):
+    """Worker processes import the main script again (multiprocessing's rule); an unguarded
+    script used to hang for ever (the forkserver preloaded it and waited on itself; then
+    multiprocessing.Pool restarted the failing workers without end). Now the tiles are
+    built in the script's own process, bitwise as the workers build them, with one warning
+    naming the remedy."""
+    import subprocess
+    import sys
+    script = tmp_path / "unguarded.py"
+    script.write_text(
+        "import numpy as np\n"
+        "from arches_render.generators.rocks.aperiodic_tiles import build_aperiodic_tiles\n"
+        "from arches_render.generators.rocks.seed_points import SeedParams\n"
+        "from arches_render.generators.rocks.tile_params import ErosionParams, TileParams\n"
+        "p = TileParams(n=4, voxels_per_cell=6, seed=3, seeds=SeedParams(g_max=4.0, alpha=(0.6, 1.6)),\n"
+        "               erosion=ErosionParams(steps=6))\n"
+        "a = build_aperiodic_tiles(p, workers=2)\n"
+        "b = build_aperiodic_tiles(p, workers=1)\n"
+        "keys = ('vertices', 'normals', 'faces', 'vstart', 'seed', 'radius', 'uid', 'slot', 'anchors')\n"
+        "same = all(np.array_equal(getattr(a, k), getattr(b, k)) for k in keys)\n"
+        "print('built', len(a), same)\n")
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip().splitlines()[-1].endswith(" True"), out.stdout
+    assert "guard its top level with 'if __name__ == \"__main__\":'" in out.stderr, out.stderr[-2000:]

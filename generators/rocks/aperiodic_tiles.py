@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import os
 import time
+import warnings
 
 import numpy as np
 from scipy import ndimage
@@ -156,8 +157,10 @@ def build_aperiodic_tiles(params: TileParams, progress=None, workers: int | None
         ``progress(done_regions, total_regions)``.
     workers : int, optional
         Worker processes (default: the CPU count, at most 8; 1 runs inline). They
-        are started by multiprocessing's forkserver, so a script calling this with
-        several workers needs the usual ``if __name__ == "__main__":`` guard.
+        are started by multiprocessing's forkserver and import the main script again,
+        so a script calling this wants the usual ``if __name__ == "__main__":``
+        guard; without it the tiles are built in its own process, with a warning
+        (:func:`_in_workers`).
 
     Returns
     -------
@@ -178,6 +181,18 @@ def build_aperiodic_tiles(params: TileParams, progress=None, workers: int | None
     batches = [order[i::max(1, 4 * workers)] for i in range(max(1, 4 * workers))]
     rocks = []
     done, cpu = 0, 0.0
+    if workers > 1:
+        try:
+            for b, (res, c) in zip(batches, _in_workers(batches, params, workers)):
+                rocks.extend(res)
+                cpu += c
+                done += len(b)
+                if progress:
+                    progress(done, len(order))
+        except _WorkersFailed as exc:
+            # Built in this process instead, from the start (the same slots give the same bits).
+            warnings.warn(str(exc), RuntimeWarning, stacklevel=2)
+            rocks, done, cpu, workers = [], 0, 0.0, 1
     if workers <= 1:
         for b in batches:
             res, c = _build_slots((b, params))
@@ -186,27 +201,52 @@ def build_aperiodic_tiles(params: TileParams, progress=None, workers: int | None
             done += len(b)
             if progress:
                 progress(done, len(order))
-    else:
-        import multiprocessing as mp
-        # Not "fork": a parent that already ran numba's (or Dr.Jit's) thread pools can hand a
-        # child a lock held by a thread that does not exist there, and the child hangs.
-        ctx = mp.get_context("forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn")
-        if ctx.get_start_method() == "forkserver":
-            # The server imports this module once and forks the workers from it, so they do
-            # not each import numba, scipy and scikit-image again (n = 5 benchmark: a worker's
-            # CPU time before its first task 0.88 -> 0.46 s). No effect once the server runs.
-            ctx.set_forkserver_preload(["__main__", __name__])
-        with ctx.Pool(workers, initializer=_single_thread) as pool:
-            for b, (res, c) in zip(batches, pool.imap(_build_slots, [(b, params) for b in batches])):
-                rocks.extend(res)
-                cpu += c
-                done += len(b)
-                if progress:
-                    progress(done, len(order))
     meta = dict(tiling="aperiodic", params=params.to_dict(), n=params.n, cells_per_period=params.n,
                 voxels_per_cell=params.voxels_per_cell, build_seconds=time.perf_counter() - t0,
                 worker_cpu_seconds=cpu, regions=len(all_regions))
     return RockStore.from_rocks(rocks, len(all_regions), meta)
+
+
+class _WorkersFailed(RuntimeError):
+    """The worker processes could not start (see :func:`_in_workers`)."""
+
+
+def _in_workers(batches, params, workers):
+    """``(rocks, cpu seconds)`` of each batch, in order, from ``workers`` processes.
+
+    Not "fork": a parent that already ran numba's (or Dr.Jit's) thread pools can hand a
+    child a lock held by a thread that does not exist there, and the child hangs. With
+    forkserver (spawn elsewhere) every worker imports the parent's main script again, as
+    Python's multiprocessing does; a script whose top level is not guarded by ``if
+    __name__ == "__main__":`` then runs again in the worker, where multiprocessing refuses
+    to start processes while the worker is still starting (its "bootstrapping phase"
+    RuntimeError), so the worker stops and
+    :class:`concurrent.futures.ProcessPoolExecutor` reports the broken pool, raised here
+    as :class:`_WorkersFailed` with the remedy (``multiprocessing.Pool`` started new
+    workers forever: an unguarded script hung). The server preloads this module only,
+    not ``__main__`` (a preloaded unguarded script ran inside the server, which then
+    waited on itself).
+    """
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+    from concurrent.futures.process import BrokenProcessPool
+
+    ctx = mp.get_context("forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn")
+    if ctx.get_start_method() == "forkserver":
+        # The server imports this module once and forks the workers from it, so they do
+        # not each import numba, scipy and scikit-image again (n = 5 benchmark: a worker's
+        # CPU time before its first task 0.88 -> 0.46 s). No effect once the server runs.
+        ctx.set_forkserver_preload([__name__])
+    try:
+        with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_single_thread) as pool:
+            yield from pool.map(_build_slots, [(b, params) for b in batches])
+    except BrokenProcessPool:
+        import sys
+        script = getattr(sys.modules.get("__main__"), "__file__", None) or "the main script"
+        raise _WorkersFailed(
+            f"rock tiles built in this process: their worker processes stopped while importing "
+            f"{script} again; guard its top level with 'if __name__ == \"__main__\":' "
+            f"(Python's multiprocessing rule) to build them in parallel") from None
 
 
 def _single_thread():
