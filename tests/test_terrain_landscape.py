@@ -286,4 +286,11 @@ def test_mountains_and_a_volcanic_cone_amplify_into_landscapes(tmp_path, capsys,
     cams = next(line for line in _header(out) if line.startswith("Cameras: "))
     covers = [float(c) for c in re.findall(r"covers (\d+) % of the frame", cams)]
     assert len(covers) >= 3 and min(covers) >= 1.0, cams
+    if dem == "real_aletsch_200m":  # high mountains: grey rock, snow on the top quarter of the relief
+        import tomllib
+        look = tomllib.loads(out.read_text())["materials"]["landscape"]
+        H = np.load(REPO / "scenes" / "data" / f"{dem}.npy")
+        relief = float(H.max() - H.min())
+        assert look["strata"]["palette"] == "limestone", look["strata"]
+        assert abs(look["overrides"]["snow.height_min"] - (float(H.max()) - 0.25 * relief)) < 1.0, look["overrides"]
     _check_shots(desc, _render_all_cameras(desc))
