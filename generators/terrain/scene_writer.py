@@ -274,23 +274,27 @@ def landscape_material(zlo, zhi, sea_level=None, geology=None, box=None, preset=
     """The ``terrain`` triplanar preset with layer heights fitted to ``[zlo, zhi]``.
 
     Sand covers low flats (up to 12 % of the relief, or a little above sea level),
-    grass gentle slopes from 10 % to 75 %, and snow only the top 5 % of a relief
-    of more than 300 m. High mountains (a relief of :data:`ALPINE_RELIEF` or more: the
-    Aletsch DEM's 3.7 km came out as orange sandstone bands under 200 m of snow) get
-    snow on the top quarter of the relief and grey rock (the ``limestone`` palette)
-    whatever the preset. With ``geology`` (the built resistance node of the scene's
-    ``[nodes.geology]``) and ``box`` (the rock's volume), the rock takes the
-    strata colours of the preset's palette (:data:`STRATA_PALETTE`), the cavity
-    term (reach two cells) and, with ``sea_level``, a wet band.
+    grass gentle slopes from 10 % to 75 %, and snow only the top 5 % of land rising
+    more than 300 m above the DEM's floor or the sea (a 300 m island over a 2 km deep
+    sea floor was snowed on its top 115 m). High mountains (land rising
+    :data:`ALPINE_RELIEF` or more: the Aletsch DEM's 3.7 km came out as orange
+    sandstone bands under 200 m of snow) get snow on the top quarter of that rise and
+    grey rock (the ``limestone`` palette) whatever the preset. With ``geology`` (the
+    built resistance node of the scene's ``[nodes.geology]``) and ``box`` (the rock's
+    volume), the rock takes the strata colours of the preset's palette
+    (:data:`STRATA_PALETTE`), the cavity term (reach two cells) and, with
+    ``sea_level``, a wet band.
     """
     relief = max(zhi - zlo, 1e-3)
-    alpine = relief >= ALPINE_RELIEF
+    # (the relief of the land: a deep sea floor makes no mountain)
+    land = zhi - (zlo if sea_level is None else max(zlo, sea_level))
+    alpine = land >= ALPINE_RELIEF
     sand_top = zlo + 0.12 * relief if sea_level is None else sea_level + 0.06 * relief
     over = {
         "sand.height_max": sand_top, "sand.height_soft": 0.04 * relief,
         "grass.height_min": zlo + 0.10 * relief, "grass.height_max": zlo + 0.75 * relief,
         "grass.height_soft": 0.05 * relief,
-        "snow.height_min": zhi - (0.25 if alpine else 0.05) * relief if relief > 300 else zhi + relief,
+        "snow.height_min": zhi - (0.25 if alpine else 0.05) * land if land > 300 else zhi + relief,
         "snow.height_soft": 0.02 * relief,
     }
     # Tiling without repetition and the detail layer come with the preset (issue 24).
