@@ -402,4 +402,5 @@ def test_a_script_without_a_main_guard_gets_its_tiles_and_a_warning_not_a_hang(t
     out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300, cwd=tmp_path)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.strip().splitlines()[-1].endswith(" True"), out.stdout
-    assert "guard its top level with 'if __name__ == \"__main__\":'" in out.stderr, out.stderr[-2000:]
+    remedy = "its top level is not guarded: guard it with 'if __name__ == \"__main__\":'"
+    assert remedy in out.stderr, out.stderr[-2000:]

@@ -255,18 +255,22 @@ def test_escarpment_at_coarse_cells_gets_legible_close_shots(tmp_path, capsys):
 
 
 def test_one_sun_lights_the_close_shot_from_behind_and_never_looks_into_the_overview():
-    from arches_render.generators.terrain.scene_writer import sun_for
+    from arches_render.generators.terrain.scene_writer import SUN_CLEAR, sun_for
     # One view: behind it, turned aside by 55 degrees (as before the overview had a say).
     assert sun_for({"azimuth": 30.0})["azimuth"] == -95.0  # 30 + 180 + 55, wrapped
-    # A close shot looking east and an overview looking west: the sun from the side of both.
+    # An overview that does not face the first view's sun leaves it where it was.
+    assert sun_for([{"azimuth": 30.0}, {"azimuth": 60.0}])["azimuth"] == -95.0
+    # A close shot looking east and an overview looking west: the sun moves off the
+    # overview's axis (SUN_CLEAR) and stays nearest behind-aside for the shot.
+    assert SUN_CLEAR == 60.0
     sun = sun_for([{"azimuth": 0.0}, {"azimuth": 180.0}])["azimuth"]
-    assert abs(abs(sun) - 90.0) < 1e-9, sun
-    # Any pair: neither view faces the sun (over 90 degrees from each view direction).
+    assert abs(abs(sun) - 120.0) < 1e-9, sun
+    # Any pair: neither view looks into the sun.
     rng = np.random.default_rng(4)
     for a, b in rng.uniform(-180.0, 180.0, (200, 2)):
         sun = sun_for([{"azimuth": a}, {"azimuth": b}])["azimuth"]
         for view in (a, b):
-            assert abs((sun - view + 180.0) % 360.0 - 180.0) >= 90.0, (a, b, sun)
+            assert abs((sun - view + 180.0) % 360.0 - 180.0) >= SUN_CLEAR, (a, b, sun)
 
 
 @pytest.mark.parametrize("dem, cell", [("real_aletsch_200m", "200"), ("real_maunga_whau_10m", "10")])

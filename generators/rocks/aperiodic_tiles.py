@@ -244,9 +244,9 @@ def _in_workers(batches, params, workers):
         import sys
         script = getattr(sys.modules.get("__main__"), "__file__", None) or "the main script"
         raise _WorkersFailed(
-            f"rock tiles built in this process: their worker processes stopped while importing "
-            f"{script} again; guard its top level with 'if __name__ == \"__main__\":' "
-            f"(Python's multiprocessing rule) to build them in parallel") from None
+            f"rock tiles built in this process: their worker processes stopped (most often because "
+            f"they import {script} again and its top level is not guarded: guard it with "
+            f"'if __name__ == \"__main__\":', Python's multiprocessing rule; else a worker was killed)") from None
 
 
 def _single_thread():
