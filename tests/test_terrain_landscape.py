@@ -293,7 +293,7 @@ def test_mountains_and_a_volcanic_cone_amplify_into_landscapes(tmp_path, capsys,
     if dem == "real_aletsch_200m":  # high mountains: grey rock, snow on the top quarter of the relief
         import tomllib
         look = tomllib.loads(out.read_text())["materials"]["landscape"]
-        H = np.load(REPO / "scenes" / "data" / f"{dem}.npy")
+        H = np.load(REPO / "scenes" / "data" / f"{dem}.npy", allow_pickle=False)
         relief = float(H.max() - H.min())
         assert look["strata"]["palette"] == "limestone", look["strata"]
         assert abs(look["overrides"]["snow.height_min"] - (float(H.max()) - 0.25 * relief)) < 1.0, look["overrides"]
