@@ -105,6 +105,17 @@ class Amplified:
         """The ``implicit_heightfield`` node (the DEM), without landforms."""
         return next(n for n in self.root.walk() if n.kind == "implicit_heightfield")
 
+    @property
+    def feature(self) -> float:
+        """Landform size ``F`` (m) the amplification used (:func:`landform_size`)."""
+        return landform_size(self.scales, self.stats["cell_size"], self.precision)
+
+
+def landform_size(scales, cell, precision) -> float:
+    """Landform size ``F`` in metres: :func:`.preset_choice.landform_scales`' ``feature_m``
+    (4 cells without one), at least two precisions."""
+    return max(float(scales.get("feature_m", 4 * cell)), 2.0 * precision)
+
 
 # -- the pipeline ------------------------------------------------------------------------------
 def amplify(heights, cell_size, preset, seed, work_dir, prefix="amplified", progress=None, options=None,
@@ -177,7 +188,7 @@ def amplify(heights, cell_size, preset, seed, work_dir, prefix="amplified", prog
         if water.sea_level is None:  # a closed basin: its floor is not at the border
             water = WaterBodies(np.where(H <= level, level, np.nan), H <= level, level, water.lakes)
     scales = landform_scales(H, cell, preset, level) if not flat else {}
-    feature = max(float(scales.get("feature_m", 4 * cell)), 2.0 * precision)
+    feature = landform_size(scales, cell, precision)
     R = min(4.0 * cell, 2.0 * feature, 0.45 * min(W, D))
     run = Amplification(NodeTables(work_dir, prefix), H, extent, cell, R, 0.5 * R, rng, scales=scales,
                         precision=precision, sea_steps=sea_steps, sea_spacing=sea_spacing)

@@ -61,7 +61,7 @@ def visible_volume(result) -> tuple[float, float]:
     (float, float)
         The volume (0 for a tree without primitives) and ``F``.
     """
-    feature = max(float(result.scales.get("feature_m", 4 * result.stats["cell_size"])), 2.0 * result.precision)
+    feature = result.feature
     if not result.stats.get("primitives"):
         return 0.0, feature
     plain = result.terrain

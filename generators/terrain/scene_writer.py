@@ -361,7 +361,7 @@ def scene_document(result, name, work_dir, progress=None, close=3):
     stats = result.stats
     water = result.water
     wmesh = trimesh.load_mesh(Path(work_dir) / result.water_file, process=False) if result.water_file else None
-    feature = max(float(result.scales.get("feature_m", 4 * stats["cell_size"])), 2.0 * result.precision)
+    feature = result.feature
     shots = close_shots(result.root, result.terrain, H, extent, feature,
                         water_level=water.level if water is not None else None, water_mesh=wmesh, count=close,
                         margin=result.terrain.R_np + 2 * stats["cell_size"], progress=progress)
