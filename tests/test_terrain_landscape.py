@@ -9,6 +9,8 @@ wall of the field's prism, a camera in rock).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -271,6 +273,46 @@ def test_one_sun_lights_the_close_shot_from_behind_and_never_looks_into_the_over
         sun = sun_for([{"azimuth": a}, {"azimuth": b}])["azimuth"]
         for view in (a, b):
             assert abs((sun - view + 180.0) % 360.0 - 180.0) >= SUN_CLEAR, (a, b, sun)
+
+
+def _view(landform, position_deg, score, cover=0.3, volume=100.0):
+    """A close-shot candidate 100 m from its landform at the origin, at ``position_deg``
+    around it (so it looks towards ``position_deg + 180``)."""
+    from arches_render.generators.terrain.shots import Shot
+    a = math.radians(position_deg)
+    return Shot(origin=np.array([100.0 * math.cos(a), 100.0 * math.sin(a), 10.0]), target=np.zeros(3), fov=50.0,
+                cover=cover, volume_m3=volume, azimuth=a, landform=landform, score=score)
+
+
+def test_later_close_shots_turn_away_from_the_sun_chosen_for_the_first():
+    from arches_render.generators.terrain.shots import choose_shots, view_azimuth
+    # Landform 0 (the largest): views from 0, 90 and 180 degrees around it, best first;
+    # landform 1: its best view looks the same way as landform 0's first.
+    views = [[_view(0, 0.0, 3.0), _view(0, 90.0, 2.0), _view(0, 180.0, 1.0)],
+             [_view(1, 0.0, 3.0, volume=50.0), _view(1, 270.0, 2.0, volume=50.0)]]
+    plain = choose_shots(views, 3)
+    assert [(s["landform"], round(math.degrees(s["azimuth"]))) for s in plain] == [(0, 0), (1, 0), (0, 90)]
+    # A sun towards 180 degrees: the second shot (landform 1 seen from 0 degrees, looking
+    # towards 180) would stare into it.
+    calls = []
+
+    def sun(first):
+        calls.append(first)
+        return 180.0, 60.0
+
+    shots = choose_shots(views, 3, sun)
+    assert calls == [plain[0]]  # the sun is chosen for the first shot, which stays
+    assert shots[0] is plain[0]
+    for s in shots[1:]:
+        assert abs((view_azimuth(s) - 180.0 + 180.0) % 360.0 - 180.0) >= 60.0, s
+    # Landform 1's view from 270 degrees (looking towards 90) replaces its view into the
+    # sun; the further view of landform 0 is the one from 90 degrees (looking towards 270).
+    assert [(s["landform"], round(math.degrees(s["azimuth"]))) for s in shots] == [(0, 0), (1, 270), (0, 90)]
+    # No view clear of the sun: the shots into it are kept rather than fewer shots.
+    few = [[_view(0, 0.0, 3.0), _view(0, 90.0, 2.0)]]
+    assert [id(s) for s in choose_shots(few, 2, lambda first: (0.0, 179.0))] == [id(s) for s in few[0]]
+    # A sun that every later shot clears changes nothing.
+    assert [id(s) for s in choose_shots(views, 3, lambda first: (0.0, 10.0))] == [id(s) for s in plain]
 
 
 @pytest.mark.parametrize("dem, cell", [("real_aletsch_200m", "200"), ("real_maunga_whau_10m", "10")])

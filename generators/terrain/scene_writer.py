@@ -326,10 +326,6 @@ def _geology(result):
     return node, (np.array([x0, y0, base]), np.array([x1, y1, float(result.heights.max())]))
 
 
-def _view_azimuth(cam):
-    return math.degrees(math.atan2(cam["target"][1] - cam["origin"][1], cam["target"][0] - cam["origin"][0]))
-
-
 def scene_document(result, name, work_dir, progress=None, close=3):
     """The scene document of an :class:`~.amplify.Amplified` and the header lines that describe it.
 
@@ -353,7 +349,7 @@ def scene_document(result, name, work_dir, progress=None, close=3):
     """
     import trimesh
 
-    from .shots import close_shots
+    from .shots import close_shots, view_azimuth
     H, extent = result.heights, result.extent
     zlo, zhi = float(H.min()), float(H.max())
     x0, y0, x1, y1 = extent
@@ -362,21 +358,26 @@ def scene_document(result, name, work_dir, progress=None, close=3):
     water = result.water
     wmesh = trimesh.load_mesh(Path(work_dir) / result.water_file, process=False) if result.water_file else None
     feature = result.feature
+    over = frame_camera(H, extent, result.focus)
+    overview = {"origin": over["origin"], "target": over["target"], "fov": over["fov"]}
+
+    def sun_views(first):
+        """The views the sun is chosen for: the first close shot, then the overview."""
+        return [dict(first, azimuth=view_azimuth(first)), dict(overview, azimuth=view_azimuth(overview))]
+
+    # One sun: lit from behind the first close shot unless that puts it in the overview's
+    # lens (sun_for). Choosing it for every view left none clear of them all but one that
+    # lit the first from the side (Jacksboro: 74 degrees from its ideal; shadow rays 40
+    # steps), so the other close shots turn away from it instead (shots.close_shots).
     shots = close_shots(result.root, result.terrain, H, extent, feature,
                         water_level=water.level if water is not None else None, water_mesh=wmesh, count=close,
-                        margin=result.terrain.R_np + 2 * stats["cell_size"], progress=progress)
+                        margin=result.terrain.R_np + 2 * stats["cell_size"], progress=progress,
+                        sun=lambda first: (sun_for(sun_views(first))["azimuth"], SUN_CLEAR))
     label = LANDFORM_NAMES[result.preset]
     cameras = {f"{label}_{k + 1}": shot.table() for k, shot in enumerate(shots)}
-    over = frame_camera(H, extent, result.focus)
-    cameras["overview"] = {"origin": over["origin"], "target": over["target"], "fov": over["fov"]}
+    cameras["overview"] = overview
     first = next(iter(cameras.values()))
-    # One sun: lit from behind the first close shot unless that puts it in the overview's
-    # lens (sun_for). The other close shots may look towards it: views all round a
-    # landform leave no azimuth clear of them all but one that lights the first from the
-    # side (Jacksboro: 74 degrees from its ideal; shadow rays 40 steps).
-    views = [dict(first, azimuth=_view_azimuth(first))]
-    if len(cameras) > 1:
-        views.append(dict(cameras["overview"], azimuth=_view_azimuth(cameras["overview"])))
+    views = sun_views(first)[:len(cameras)]
     doc = {
         "scene": {"name": name,
                   "description": f"DEM amplified with the '{result.preset}' preset (seed {stats['seed']}): "

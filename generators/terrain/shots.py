@@ -42,7 +42,11 @@ Views
 Choice
     The close shots are the best view of each landform in the order of
     ``3-D volume x cover``, then further views of the best landforms (azimuths at
-    least 60 degrees apart) until there are ``count``.
+    least 60 degrees apart) until there are ``count``. The scene's one sun is chosen
+    for the first shot (lit from behind, turned aside); a later shot that would look
+    within ``clear`` degrees of it (a white sky, the landform against the light) is
+    replaced, by the same rule over the views that look away from it, and kept only
+    where no such view frames a landform.
 """
 
 from __future__ import annotations
@@ -58,7 +62,7 @@ from arches_render.field.node import evaluate
 from .accessibility import RayCaster, heightfield_mesh
 from .banded import polygonize_banded
 
-__all__ = ["landform_cells", "landform_volume", "close_shots", "Shot"]
+__all__ = ["landform_cells", "landform_volume", "close_shots", "choose_shots", "view_azimuth", "Shot"]
 
 _RAYS = (32, 18)
 _HEIGHTS = (1.7, 6.0, 20.0, 60.0, 150.0)
@@ -275,7 +279,7 @@ def legibility(D, t, hit):
 
 
 def close_shots(root, plain, heights, extent, feature, water_level=None, water_mesh=None, count=3,
-                fov=50.0, aspect=16 / 9, margin=0.0, progress=None):
+                fov=50.0, aspect=16 / 9, margin=0.0, progress=None, sun=None):
     """Close shots of the most significant 3-D landforms (see the module docstring).
 
     Parameters
@@ -301,6 +305,9 @@ def close_shots(root, plain, heights, extent, feature, water_level=None, water_m
         Cameras keep this far (m) inside the tile's border.
     progress : callable, optional
         ``progress(done, total)`` over landforms.
+    sun : callable, optional
+        ``sun(first) -> (azimuth, clear)``: the azimuth towards the sun chosen for the
+        first shot (degrees) and how near it the later shots may look (degrees).
 
     Returns
     -------
@@ -369,17 +376,72 @@ def close_shots(root, plain, heights, extent, feature, water_level=None, water_m
                                         for m, v in legible.items()}))
         best.sort(key=lambda s: -s["score"])
         views.append(best)
+    return choose_shots(views, count, sun)
+
+
+def choose_shots(views, count, sun=None):
+    """The close shots among each landform's views (module docstring, "Choice").
+
+    Parameters
+    ----------
+    views : list of list of Shot
+        Per landform, its legible views, best first (``score``); each view has
+        ``cover``, ``volume_m3``, ``azimuth`` (radians, of its position around the
+        landform), ``landform``, ``origin`` and ``target``.
+    count : int
+        Shots wanted.
+    sun : callable, optional
+        As for :func:`close_shots`.
+
+    Returns
+    -------
+    list of Shot
+    """
     order = sorted(range(len(views)), key=lambda i: -(views[i][0]["volume_m3"] * views[i][0]["cover"])
                    if views[i] else 0.0)
-    shots = [views[i][0] for i in order if views[i] and views[i][0]["cover"] > 0][:count]
+    shots = _select(views, order, count)
+    if sun is None or not shots:
+        return shots
+    # The later shots turned away from the sun where their landforms allow it (module
+    # docstring, "Choice"); the first one, which the sun was chosen for, stays.
+    towards, clear = sun(shots[0])
+    away = lambda s: abs((view_azimuth(s) - towards + 180.0) % 360.0 - 180.0) >= clear  # noqa: E731
+    if all(away(s) for s in shots[1:]):
+        return shots
+    turned = _select(views, order, count, away)
+    return turned + [s for s in shots if not any(s is t for t in turned)][:count - len(turned)]
+
+
+def view_azimuth(camera):
+    """The azimuth a camera looks in (degrees counter-clockwise from +x) from its
+    ``origin`` and ``target``."""
+    (x0, y0), (x1, y1) = camera["origin"][:2], camera["target"][:2]
+    return math.degrees(math.atan2(y1 - y0, x1 - x0))
+
+
+def _select(views, order, count, ok=None):
+    """Up to ``count`` shots (module docstring, "Choice") from each landform's views
+    (best first) in the landforms' ``order``; after the first, only views that ``ok``
+    accepts (a landform whose best accepted view frames none of it gives none)."""
+    shots = []
+    for i in order:
+        if len(shots) >= count:
+            break
+        if not views[i]:
+            continue
+        s = views[i][0] if not shots or ok is None else next((v for v in views[i] if ok(v)), None)
+        if s is not None and s["cover"] > 0:
+            shots.append(s)
     # More views of the best landforms, azimuths at least 60 degrees apart, until there are enough.
     for i in order:
-        for s in views[i][1:]:
+        for s in views[i]:
             if len(shots) >= count:
                 break
+            if any(s is x for x in shots) or s["cover"] <= 0 or (ok is not None and not ok(s)):
+                continue
             same = [x for x in shots if x["landform"] == s["landform"]]
             gap = min((abs((s["azimuth"] - x["azimuth"] + math.pi) % (2 * math.pi) - math.pi) for x in same),
                       default=math.pi)
-            if gap >= math.radians(60) and s["cover"] > 0:
+            if gap >= math.radians(60):
                 shots.append(s)
     return shots
