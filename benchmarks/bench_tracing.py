@@ -39,7 +39,8 @@
                       20. Extra fields: mean, 99th percentile and mean packet maximum
                       (over 16 consecutive lanes: a SIMD packet loops until its slowest
                       lane is done, so this, not the mean, is what a render pays) per
-                      scene, tracer and ray type.
+                      scene, tracer and ray type; shadow rays also split into
+                      ``shadow_free`` (reaching the sky) and ``shadow_blocked``.
 ``render_field_vs_sdfgrid``  (issue 32) the default scene traced by ``implicit_path``
                       against the same field sampled at the mesh voxel and rendered as
                       Mitsuba's own ``sdfgrid`` shape (320x180, 16 spp, warm): field

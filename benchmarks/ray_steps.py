@@ -2,7 +2,8 @@
 
 :func:`ray_steps` traces one camera ray a pixel through a scene's field (pixel cone),
 then from each hit one shadow ray towards the scene's first sun (the integrator skips
-those below the surface: so does this) and one cosine-sampled bounce ray whose cone
+those below the surface: so does this; reported also split into those that reach the
+sky and those that rock blocks) and one cosine-sampled bounce ray whose cone
 widens by the integrator's ``lod_bounce_spread``; each query reports its steps (field
 evaluations) and cells (cheap cell visits of a structure or a heightfield cast).
 Only the field is traced (no meshes), with the tracer the renderer would build.
@@ -85,7 +86,8 @@ def ray_steps(desc, tracer, width=320, height=180, seed=1):
     Returns
     -------
     dict
-        ``{kind: {n, mean, p99, cells_mean, packet}}`` for ``camera``, ``shadow``, ``bounce``;
+        ``{kind: {n, mean, p99, cells_mean, packet}}`` for ``camera``, ``shadow``, ``bounce``
+        and the shadow rays split into ``shadow_free`` and ``shadow_blocked``;
         ``packet``: the mean over packets of 16 consecutive lanes of their largest count.
     """
     from bench_tracing import camera_rays
@@ -106,8 +108,13 @@ def ray_steps(desc, tracer, width=320, height=180, seed=1):
     sun = _vector(_sun_direction(desc), origin.x)
     lit = first.hit & (dr.dot(n, sun) > 0.0) & (dr.dot(n, -d) > 0.0)
     shadow = tracer.query(origin, sun, mi.Float(dr.inf), lit, hit_cone, any_hit=True)
-    dr.eval(shadow.steps)
-    out["shadow"] = _stats(shadow, lit.numpy())
+    dr.eval(shadow.steps, shadow.hit)
+    lit_np, blocked = lit.numpy(), np.broadcast_to(shadow.hit.numpy(), (len(hit),))
+    out["shadow"] = _stats(shadow, lit_np)
+    # Rays that reach the sky and rays stopped by rock cost differently (goblins: 49 and
+    # 61 steps): a structure that ends free rays early does nothing for blocked ones.
+    out["shadow_free"] = _stats(shadow, lit_np & ~blocked)
+    out["shadow_blocked"] = _stats(shadow, lit_np & blocked)
     rng = np.random.default_rng(seed)
     u1, u2 = rng.random(len(hit)).astype(np.float32), rng.random(len(hit)).astype(np.float32)
     local = mi.Vector3f(mi.Float(np.sqrt(u1) * np.cos(2 * np.pi * u2)),
@@ -132,7 +139,7 @@ def main(argv):
         stats = ray_steps(desc, tracer)
         print(path, type(tracer).__name__)
         for kind, s in stats.items():
-            print(f"  {kind:7s} n={s['n']:6d} mean={s['mean']:7.1f} p99={s['p99']:7.0f} cells={s['cells_mean']:6.1f} packet={s['packet']:6.1f}")
+            print(f"  {kind:14s} n={s['n']:6d} mean={s['mean']:7.1f} p99={s['p99']:7.0f} cells={s['cells_mean']:6.1f} packet={s['packet']:6.1f}")
     return 0
 
 
