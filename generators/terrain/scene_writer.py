@@ -362,8 +362,8 @@ def scene_document(result, name, work_dir, progress=None, close=3):
     overview = {"origin": over["origin"], "target": over["target"], "fov": over["fov"]}
 
     def sun_views(first):
-        """The views the sun is chosen for: the first close shot, then the overview."""
-        return [dict(first, azimuth=view_azimuth(first)), dict(overview, azimuth=view_azimuth(overview))]
+        """The views the sun is chosen for: the first close shot (if any), then the overview."""
+        return [dict(v, azimuth=view_azimuth(v)) for v in (first, overview) if v is not None]
 
     # One sun: lit from behind the first close shot unless that puts it in the overview's
     # lens (sun_for). Choosing it for every view left none clear of them all but one that
@@ -376,15 +376,13 @@ def scene_document(result, name, work_dir, progress=None, close=3):
     label = LANDFORM_NAMES[result.preset]
     cameras = {f"{label}_{k + 1}": shot.table() for k, shot in enumerate(shots)}
     cameras["overview"] = overview
-    first = next(iter(cameras.values()))
-    views = sun_views(first)[:len(cameras)]
     doc = {
         "scene": {"name": name,
                   "description": f"DEM amplified with the '{result.preset}' preset (seed {stats['seed']}): "
                                  f"{stats['nodes']} nodes, {stats['primitives']} primitives"},
         "render": {"resolution": [640, 360], "spp": 32, "max_depth": 3},
         "cameras": cameras,
-        "lights": [sun_for(views)],
+        "lights": [sun_for(sun_views(shots[0] if shots else None))],
         "materials": {"landscape": landscape_material(zlo, zhi, result.sea_level, *_geology(result),
                                                       preset=result.preset, cell=stats["cell_size"])},
         "field": {"root": "world", "material": "landscape"},
