@@ -27,14 +27,16 @@
 
                       Extra fields per scene: ``cells_build_s`` and ``cells_mb``, the
                       surface cells' build time and memory (issue 32: built once a
-                      scene), against ``mesh_mb``, the marching-cubes mesh's.
+                      scene), ``sun_build_s`` and ``sun_mb``, the sun map's (opt-in:
+                      ``[render] sun_columns``), against ``mesh_mb``, the marching-cubes mesh's.
 
 ``trace_steps_by_ray_type``  (issue 32) steps (field evaluations) per ray of camera,
                       shadow and bounce rays (``benchmarks/ray_steps.py``: 320x180, one
-                      camera ray a pixel, a shadow ray to the sun and a cosine bounce
-                      from each hit) on ``fig23_goblins``, ``every_generator`` and the
-                      amplified NM canyon, with the sphere tracer and with the cell
-                      tracer (surface cells) in the same run. Value: the largest mean
+                      camera ray a pixel, a shadow ray to the sun's disk and a cosine
+                      bounce from each hit) on ``fig23_goblins``, ``every_generator`` and
+                      the amplified NM canyon, with the renderer's tracer, the sphere
+                      tracer alone, the cell tracer (surface cells) and the sphere tracer
+                      with its sun map (``sun_columns``) in the same run. Value: the largest mean
                       of shadow steps with the renderer's tracer; baseline: the goal,
                       20. Extra fields: mean, 99th percentile and mean packet maximum
                       (over 16 consecutive lanes: a SIMD packet loops until its slowest
@@ -153,18 +155,26 @@ def _landscape_scenes(tmp):
 
 
 def _structure_and_mesh_size(desc, mesh_scene):
-    """``{cells_build_s, cells_mb, mesh_mb}``: the surface cells of the scene's field (as
-    the cell tracer builds them) against its marching-cubes mesh in ``mesh_scene``."""
+    """``{cells_build_s, cells_mb, sun_build_s, sun_mb, mesh_mb}``: the surface cells of the
+    scene's field (as the cell tracer builds them) and its sun map (as the renderer builds it)
+    against its marching-cubes mesh in ``mesh_scene``."""
     from arches_render.render.cell_tracer import CellTracer
+    from ray_steps import aim_at_sun
     r = desc.render
     t0 = time.perf_counter()
     tracer = CellTracer(desc.field, eps=r.eps, omega=r.omega, max_steps=r.max_steps)
     built = time.perf_counter() - t0
+    sun_tracer = SphereTracer(desc.field, eps=r.eps, omega=r.omega, max_steps=r.max_steps)
+    t0 = time.perf_counter()
+    aim_at_sun(desc, sun_tracer)
+    sun_built = time.perf_counter() - t0
+    sun = getattr(sun_tracer, "sun", None)
     params = mi.traverse(mesh_scene)
     mesh_bytes = sum(4 * dr.width(params[k]) for k in params.keys()
                      if k.startswith("field_mesh.") and k.split(".")[-1] in ("vertex_positions", "vertex_normals",
                                                                               "faces"))
     return dict(cells_build_s=round(built, 2), cells_mb=round(tracer.cells.nbytes() / 1e6, 2),
+                sun_build_s=round(sun_built, 2), sun_mb=round(sun.nbytes() / 1e6, 2) if sun is not None else 0.0,
                 mesh_mb=round(mesh_bytes / 1e6, 2))
 
 
@@ -218,7 +228,7 @@ def bench_trace_steps_by_ray_type(repeat):
     from arches_render.render.cell_tracer import CellTracer
     from arches_render.render.heightfield_caster import make_tracer
     from arches_render.scene import load_scene
-    from ray_steps import ray_steps
+    from ray_steps import aim_at_sun, ray_steps
     out, worst = {}, 0.0
     with tempfile.TemporaryDirectory() as tmp:
         os.environ["ARCHES_BENCH_LANDSCAPE_SCENES"] = "fig23_goblins,every_generator,real_nm_canyon_10m"
@@ -233,6 +243,10 @@ def bench_trace_steps_by_ray_type(repeat):
                                                cells=r.surface_cells),
                        "sphere": SphereTracer(desc.field, eps=r.eps, omega=r.omega, max_steps=r.max_steps),
                        "cells": CellTracer(desc.field, eps=r.eps, omega=r.omega, max_steps=r.max_steps)}
+            if r.sun_columns:
+                aim_at_sun(desc, tracers["renderer"])  # as the renderer does
+            tracers["sun_columns"] = SphereTracer(desc.field, eps=r.eps, omega=r.omega, max_steps=r.max_steps)
+            aim_at_sun(desc, tracers["sun_columns"])
             for label, tracer in tracers.items():
                 for kind, st in ray_steps(desc, tracer).items():
                     out[f"{name}.{label}.{kind}"] = [round(st["mean"], 1), round(st["p99"], 1),

@@ -1,7 +1,8 @@
 """Field tracer steps per ray, by kind of ray, as the integrator casts them.
 
 :func:`ray_steps` traces one camera ray a pixel through a scene's field (pixel cone),
-then from each hit one shadow ray towards the scene's first sun (the integrator skips
+then from each hit one shadow ray towards the scene's first sun, in a direction drawn
+on its disk (the integrator skips
 those below the surface: so does this; reported also split into those that reach the
 sky and those that rock blocks) and one cosine-sampled bounce ray whose cone
 widens by the integrator's ``lod_bounce_spread``; each query reports its steps (field
@@ -10,7 +11,7 @@ Only the field is traced (no meshes), with the tracer the renderer would build.
 
 Used by ``trace_steps_by_ray_type`` (``bench_tracing.py``) and by hand::
 
-    python benchmarks/ray_steps.py scenes/gallery/fig23_goblins.toml
+    python benchmarks/ray_steps.py [--sun-columns] scenes/gallery/fig23_goblins.toml
 """
 
 from __future__ import annotations
@@ -26,17 +27,24 @@ import numpy as np
 BOUNCE_SPREAD = 0.1
 
 
-def _sun_direction(desc):
-    """Unit direction towards the scene's first sun (or a 35 degree default)."""
-    for light in desc.lights:
-        if "sun_direction" in light:
-            v = np.asarray(light["sun_direction"], float)
-            return v / np.linalg.norm(v)
-        if light.get("type") == "directional" and "direction" in light:
-            v = -np.asarray(light["direction"], float)
-            return v / np.linalg.norm(v)
-    v = np.array([0.5, -0.6, 0.7])
-    return v / np.linalg.norm(v)
+def _sun(desc):
+    """Unit direction towards the scene's first sun (or a 35 degree default) and its
+    angular radius (radians)."""
+    from arches_render.render.sun_columns import scene_sun
+    sun = scene_sun(desc.lights)
+    v, radius = sun if sun is not None else (np.array([0.5, -0.6, 0.7]), 0.0)
+    return v / np.linalg.norm(v), radius
+
+
+def _sun_rays(axis, radius, n, rng):
+    """``n`` directions uniform in the cone of ``radius`` around ``axis`` (the sun's
+    disk, as the emitter samples it; numpy ``(n, 3)``)."""
+    from arches_render.render.sun_columns import sun_frame
+    e1, e2 = sun_frame(axis)
+    cos_t = 1.0 - rng.random(n) * (1.0 - np.cos(radius))
+    sin_t = np.sqrt(np.maximum(1.0 - cos_t ** 2, 0.0))
+    phi = 2.0 * np.pi * rng.random(n)
+    return (cos_t[:, None] * axis + (sin_t * np.cos(phi))[:, None] * e1 + (sin_t * np.sin(phi))[:, None] * e2)
 
 
 def _vector(v, like):
@@ -67,6 +75,14 @@ def _stats(res, lanes):
     busy = lanes[:n].reshape(-1, PACKET).any(axis=1)
     return dict(n=int(len(steps)), mean=float(steps.mean()), p99=float(np.percentile(steps, 99)),
                 cells_mean=float(np.mean(cells)), packet=float(groups.max(axis=1)[busy].mean()))
+
+
+def aim_at_sun(desc, tracer):
+    """Give ``tracer`` the scene's sun map, as the renderer does (:mod:`arches_render.render.sun_columns`)."""
+    from arches_render.render.sun_columns import scene_sun
+    sun = scene_sun(desc.lights)
+    if sun is not None and hasattr(tracer, "aim_at_sun"):
+        tracer.aim_at_sun(*sun)
 
 
 def ray_steps(desc, tracer, width=320, height=180, seed=1):
@@ -105,7 +121,10 @@ def ray_steps(desc, tracer, width=320, height=180, seed=1):
     lift = dr.maximum(0.1 * tracer.eps * first.t, 32 * 1.1920929e-7 * dr.max(dr.abs(p)) + 1e-6)
     origin = p + n * lift
     hit_cone = (cone[0] + cone[1] * first.t, cone[1])
-    sun = _vector(_sun_direction(desc), origin.x)
+    rng = np.random.default_rng(seed)
+    axis, radius = _sun(desc)
+    rays = _sun_rays(axis, radius, dr.width(origin), rng).astype(np.float32)
+    sun = mi.Vector3f(*(mi.Float(rays[:, k]) for k in range(3)))
     lit = first.hit & (dr.dot(n, sun) > 0.0) & (dr.dot(n, -d) > 0.0)
     shadow = tracer.query(origin, sun, mi.Float(dr.inf), lit, hit_cone, any_hit=True)
     dr.eval(shadow.steps, shadow.hit)
@@ -115,7 +134,6 @@ def ray_steps(desc, tracer, width=320, height=180, seed=1):
     # 61 steps): a structure that ends free rays early does nothing for blocked ones.
     out["shadow_free"] = _stats(shadow, lit_np & ~blocked)
     out["shadow_blocked"] = _stats(shadow, lit_np & blocked)
-    rng = np.random.default_rng(seed)
     u1, u2 = rng.random(len(hit)).astype(np.float32), rng.random(len(hit)).astype(np.float32)
     local = mi.Vector3f(mi.Float(np.sqrt(u1) * np.cos(2 * np.pi * u2)),
                         mi.Float(np.sqrt(u1) * np.sin(2 * np.pi * u2)), mi.Float(np.sqrt(1 - u1)))
@@ -128,6 +146,10 @@ def ray_steps(desc, tracer, width=320, height=180, seed=1):
 
 
 def main(argv):
+    """``ray_steps.py [--sun-columns] SCENE...``: the renderer's tracer, or with the
+    option, with the sun map whatever the scene says."""
+    sun_columns = "--sun-columns" in argv
+    argv = [a for a in argv if a != "--sun-columns"]
     from arches_render import backend
     backend.set_variant()
     from arches_render.render.heightfield_caster import make_tracer
@@ -136,6 +158,8 @@ def main(argv):
         desc = load_scene(path)
         r = desc.render
         tracer = make_tracer(desc.field, eps=r.eps, omega=r.omega, max_steps=r.max_steps)
+        if r.sun_columns or sun_columns:
+            aim_at_sun(desc, tracer)
         stats = ray_steps(desc, tracer)
         print(path, type(tracer).__name__)
         for kind, s in stats.items():

@@ -94,7 +94,9 @@ class _ImplicitPathImpl:
     sphere-trace every field, for comparisons), ``lod`` (true: footprint level of
     detail, see the module docstring), ``lod_bounce_spread`` (0.1 rad: the cone
     spread a non-delta bounce adds), ``surface_cells`` (false: trace fields that no
-    heightfield cast answers through surface cells, :mod:`.cell_tracer`).
+    heightfield cast answers through surface cells, :mod:`.cell_tracer`), ``sun_columns``
+    (false: shadow rays towards the sun end where a map in its frame proves the rest
+    free, :mod:`.sun_columns`).
     """
 
     def __init__(self, props):
@@ -112,17 +114,22 @@ class _ImplicitPathImpl:
         self.lod = bool(props.get("lod", True))
         self.lod_bounce_spread = float(props.get("lod_bounce_spread", 0.1))
         self.surface_cells = bool(props.get("surface_cells", False))
+        self.sun_columns = bool(props.get("sun_columns", False))
         self.tracer = None
         self.field_bsdf = None
         self.shaded_bsdf = None
         self.atmosphere = None
         self.set_pixel_angle(0.0)
 
-    def attach(self, field, bsdf):
+    def attach(self, field, bsdf, sun=None):
         """Give the integrator the field to trace and the BSDF that shades it (heightfield
-        trees are ray-cast, others sphere-traced: :func:`make_tracer`)."""
+        trees are ray-cast, others sphere-traced: :func:`make_tracer`); ``sun``, the
+        scene's ``(direction, angular radius)`` (:func:`~.sun_columns.scene_sun`), gives a
+        sphere tracer its sun map (:mod:`.sun_columns`) when ``sun_columns`` is on."""
         self.tracer = make_tracer(field, eps=self.eps, omega=self.omega, max_steps=self.max_steps,
                                   cast=self.heightfield_cast, cells=self.surface_cells)
+        if sun is not None and self.sun_columns and hasattr(self.tracer, "aim_at_sun"):
+            self.tracer.aim_at_sun(*sun)
         self.field_bsdf = bsdf
         self.shaded_bsdf = bsdf
 

@@ -33,6 +33,7 @@ from ..scene.material_keys import FIELD_ROOT
 from .aovs import split_channels
 from .atmosphere import Atmosphere
 from .plugins import ensure_registered
+from .sun_columns import scene_sun
 
 PASS_SPP = 16
 MAX_PASSES = 4096
@@ -344,7 +345,8 @@ def integrator_dict(desc, geometry, field_bsdf=None, aovs=False, moments=False) 
         return d
     return {"type": "implicit_path", "max_depth": s.max_depth, "rr_depth": s.rr_depth,
             "eps": s.eps, "omega": s.omega, "max_steps": s.max_steps,
-            "surface_cells": s.surface_cells, "lod": s.lod, "aovs": bool(aovs), "moments": bool(moments)}
+            "surface_cells": s.surface_cells, "sun_columns": s.sun_columns, "lod": s.lod, "aovs": bool(aovs),
+            "moments": bool(moments)}
 
 
 def attach_field(integrator, desc, geometry, field_bsdf) -> None:
@@ -353,7 +355,7 @@ def attach_field(integrator, desc, geometry, field_bsdf) -> None:
     if desc.field is None:
         return
     if geometry not in ("mesh", "sdfgrid"):
-        integrator.attach(desc.field, field_bsdf)
+        integrator.attach(desc.field, field_bsdf, sun=scene_sun(desc.lights))
     elif hasattr(field_bsdf, "shade") and hasattr(integrator, "attach_material"):
         integrator.attach_material(field_bsdf)
 

@@ -34,6 +34,7 @@ from ..field.culling import with_culling
 from ..field.lod import Footprint
 from ..field.node import finite_box, one_sided
 from .march import SECOND_PASS_FACTOR, March, march_result, position_ulps, ray_box, relaxed_step
+from .sun_columns import SUN_HALF_ANGLE, SunColumns
 
 #: Fraction of the cone's radius that a hit may stay in front of the surface. At a
 #: camera ray's cone it is about ``eps t``: silhouettes are not dilated (a hit within
@@ -78,8 +79,18 @@ class SphereTracer:
         self.hi_op = [dr.opaque(mi.Float, v) for v in self.hi]
         self.scale_op = dr.opaque(mi.Float, self.scale)
         self.eps = dr.opaque(mi.Float, eps)
+        self.eps_np = float(eps)
         self.omega = float(omega)
         self.max_steps = int(max_steps)
+        self.sun = None
+
+    def aim_at_sun(self, direction, half_angle=SUN_HALF_ANGLE):
+        """Build the :class:`~.sun_columns.SunColumns` of this field for a sun towards
+        ``direction`` (within ``half_angle`` radians; 0 for a directional light):
+        shadow rays towards it then stop where the map proves the rest free, or at
+        once where it proves them in rock (:meth:`query`)."""
+        self.sun = SunColumns(self.field, self.lo, self.hi, direction, self.eps_np * self.scale,
+                              half_angle=half_angle)
 
     def tolerance(self, t, cone=None):
         """Hit tolerance at distance ``t``: ``eps t``, or with a cone ``(r0, s)`` the
@@ -114,8 +125,9 @@ class SphereTracer:
         cone : (mi.Float, mi.Float), optional
             ``(r0, s)``: each lane's cone (module docstring); None: full detail.
         any_hit : bool
-            Unused here (every hit of the sphere tracer is certain); for the
-            interface of :class:`~.heightfield_caster.HeightfieldCaster`.
+            A shadow ray: with a sun map (:meth:`aim_at_sun`) a ray towards the sun
+            stops where the map proves the rest of it free, and one it proves in rock
+            is a hit without a step (``t`` its start). Every hit of the sphere tracer is certain.
 
         Returns
         -------
@@ -124,8 +136,17 @@ class SphereTracer:
         t_in, t_out = ray_box(o, d, self.lo_op, self.hi_op)
         t_start = dr.maximum(t_in, 0.0)
         t_end = dr.minimum(t_out, tmax)
-        active = mi.Bool(active) & (t_start <= t_end)
-        return self._march(mi.Point3f(o), mi.Vector3f(d), t_start, t_end, active, cone)
+        if not (any_hit and self.sun is not None):
+            active = mi.Bool(active) & (t_start <= t_end)
+            return self._march(mi.Point3f(o), mi.Vector3f(d), t_start, t_end, active, cone)
+        t_cap, rock = self.sun.limits(o, d, tmax)
+        rock &= mi.Bool(active) & (t_start <= t_end)
+        t_end = dr.minimum(t_end, t_cap)
+        active = mi.Bool(active) & ~rock & (t_start <= t_end)
+        res = self._march(mi.Point3f(o), mi.Vector3f(d), t_start, t_end, active, cone)
+        res.hit |= rock
+        res.t = dr.select(rock, t_start, res.t)
+        return res
 
     @dr.syntax
     def _march(self, o, d, t_start, t_end, active, cone):

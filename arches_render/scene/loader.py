@@ -17,8 +17,10 @@ A scene file is data, never code. Top-level tables:
                  :mod:`arches_render.render.march`), ``surface_cells`` (trace
                  through the surface cells of :mod:`arches_render.render.cell_tracer`:
                  empty space jumped over, rock seen ahead by shadow rays; default
-                 false), ``lod`` (footprint level of detail: octaves finer than a
-                 ray's cone skipped, :mod:`arches_render.field.lod`; default true;
+                 false), ``sun_columns`` (shadow rays towards the sun end where a
+                 map in its frame proves the rest free,
+                 :mod:`arches_render.render.sun_columns`; default false), ``lod``
+                 (footprint level of detail: octaves finer than a ray's cone skipped, :mod:`arches_render.field.lod`; default true;
                  false renders full detail, e.g. a heavily displaced rim against
                  the sky, whose coverage level of detail thins)
 ``[camera]``     ``origin``, ``target``, ``up`` (default +Z), ``fov`` (degrees, horizontal)
@@ -117,6 +119,7 @@ class RenderSettings:
     omega: float = 1.6
     max_steps: int = 512
     surface_cells: bool = False
+    sun_columns: bool = False
     lod: bool = True
 
 
@@ -454,6 +457,7 @@ def parse_scene(data: dict, path) -> SceneDescription:
         omega=r.number("omega", 1.6, lo=1.0, hi=1.95),
         max_steps=r.integer("max_steps", 512, lo=16, hi=1 << 16),
         surface_cells=r.boolean("surface_cells", False),
+        sun_columns=r.boolean("sun_columns", False),
         lod=r.boolean("lod", True))
     if settings.max_depth == 0:
         raise r.error("max_depth", "must be -1 (unbounded) or an integer in [1, 1024] (got 0)")
