@@ -136,7 +136,7 @@ def test_shadow_rays_towards_the_sun_keep_their_answers_in_fewer_steps(name, hal
         assert np.all(a.hit.numpy()[rock.numpy()])
 
 
-def test_rays_off_the_sun_are_not_helped():
+def test_rays_off_the_sun_or_from_outside_the_box_are_not_helped():
     tracer = _aimed("arch", SUNS["low"])
     rng = np.random.default_rng(5)
     pts, _ = _surface_points(tracer, 4000, rng)
@@ -146,6 +146,11 @@ def test_rays_off_the_sun_are_not_helped():
     d = off + math.tan(2.0 * SUN_HALF_ANGLE) * e1
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     t_cap, rock = tracer.sun.limits(_vec(pts, mi.Point3f), _vec(d, mi.Vector3f), mi.Float(dr.inf))
+    assert np.all(np.isinf(t_cap.numpy())) and not rock.numpy().any()
+    # Nor rays from outside the box, whose tolerance grows past what the tops keep clear of.
+    outside = pts - 200.0 * SUNS["low"] / np.linalg.norm(SUNS["low"])
+    sun = np.tile(SUNS["low"] / np.linalg.norm(SUNS["low"]), (len(pts), 1))
+    t_cap, rock = tracer.sun.limits(_vec(outside, mi.Point3f), _vec(sun, mi.Vector3f), mi.Float(dr.inf))
     assert np.all(np.isinf(t_cap.numpy())) and not rock.numpy().any()
 
 

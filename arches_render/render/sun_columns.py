@@ -114,7 +114,9 @@ class SunColumns:
     sun : sequence of 3 floats
         Direction towards the sun (normalized here).
     tolerance : float
-        The tracer's largest hit tolerance (metres): ``W`` keeps this far from the surface.
+        The tracer's largest hit tolerance for rays from inside the box (metres, ``eps``
+        times its diagonal): ``W`` keeps this far from the surface; rays from outside
+        it are not helped.
     half_angle : float
         Largest angle between a sun ray and ``sun`` (radians): rays farther off are not
         helped. 0 for a directional light.
@@ -125,6 +127,8 @@ class SunColumns:
     def __init__(self, field, lo, hi, sun, tolerance, half_angle=SUN_HALF_ANGLE, columns=COLUMNS):
         a = np.asarray(sun, np.float64)
         self.a = a / np.linalg.norm(a)
+        self._lo = [dr.opaque(mi.Float, float(v)) for v in lo]
+        self._hi = [dr.opaque(mi.Float, float(v)) for v in hi]
         self.e1, self.e2 = sun_frame(self.a)
         corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
         u, v, w = corners @ self.e1, corners @ self.e2, corners @ self.a
@@ -222,7 +226,10 @@ class SunColumns:
         fu = (dr.dot(mi.Vector3f(o), mi.Vector3f(*self._e1)) - self.u0) / self.s
         fv = (dr.dot(mi.Vector3f(o), mi.Vector3f(*self._e2)) - self.v0) / self.s
         sun_ray = (cos_b >= self.cos_max) & (sin_b <= self.sin_max)
-        inside = sun_ray & (fu >= 0.0) & (fv >= 0.0) & (fu < self.nu) & (fv < self.nv)
+        # Origins in the box only: there every point of the ray within it is closer than
+        # the box's diagonal, so its hit tolerance is at most the one the tops keep clear of.
+        in_box = dr.all((o >= mi.Point3f(*self._lo)) & (o <= mi.Point3f(*self._hi)))
+        inside = sun_ray & in_box & (fu >= 0.0) & (fv >= 0.0) & (fu < self.nu) & (fv < self.nv)
         col = mi.UInt32(dr.clip(fu, 0.0, self.nu - 1.0)) * self.nv + mi.UInt32(dr.clip(fv, 0.0, self.nv - 1.0))
         inv_cos = dr.rcp(dr.maximum(cos_b, 1e-6))
         # Greedy union from the last level down: I_k extends [start, inf) when it reaches it.
