@@ -36,17 +36,6 @@ def _sun(desc):
     return v / np.linalg.norm(v), radius
 
 
-def _sun_rays(axis, radius, n, rng):
-    """``n`` directions uniform in the cone of ``radius`` around ``axis`` (the sun's
-    disk, as the emitter samples it; numpy ``(n, 3)``)."""
-    from arches_render.render.sun_columns import sun_frame
-    e1, e2 = sun_frame(axis)
-    cos_t = 1.0 - rng.random(n) * (1.0 - np.cos(radius))
-    sin_t = np.sqrt(np.maximum(1.0 - cos_t ** 2, 0.0))
-    phi = 2.0 * np.pi * rng.random(n)
-    return (cos_t[:, None] * axis + (sin_t * np.cos(phi))[:, None] * e1 + (sin_t * np.sin(phi))[:, None] * e2)
-
-
 def _vector(v, like):
     return mi.Vector3f(*(mi.Float(float(c)) + 0.0 * like for c in v))
 
@@ -123,7 +112,8 @@ def ray_steps(desc, tracer, width=320, height=180, seed=1):
     hit_cone = (cone[0] + cone[1] * first.t, cone[1])
     rng = np.random.default_rng(seed)
     axis, radius = _sun(desc)
-    rays = _sun_rays(axis, radius, dr.width(origin), rng).astype(np.float32)
+    from arches_render.render.sun_columns import disk_directions
+    rays = disk_directions(axis, radius, dr.width(origin), rng).astype(np.float32)
     sun = mi.Vector3f(*(mi.Float(rays[:, k]) for k in range(3)))
     lit = first.hit & (dr.dot(n, sun) > 0.0) & (dr.dot(n, -d) > 0.0)
     shadow = tracer.query(origin, sun, mi.Float(dr.inf), lit, hit_cone, any_hit=True)

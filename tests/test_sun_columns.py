@@ -17,7 +17,7 @@ import drjit as dr  # noqa: E402
 import mitsuba as mi  # noqa: E402
 
 from arches_render.render.sphere_tracer import SphereTracer  # noqa: E402
-from arches_render.render.sun_columns import SUN_HALF_ANGLE, scene_sun, sun_frame  # noqa: E402
+from arches_render.render.sun_columns import SUN_HALF_ANGLE, disk_directions, scene_sun, sun_frame  # noqa: E402
 
 from test_surface_cells import TREES, _vec  # noqa: E402
 
@@ -95,15 +95,6 @@ def _surface_points(tracer, n, rng):
     return pts[hit], nrm[hit]
 
 
-def _disk(axis, radius, n, rng):
-    e1, e2 = sun_frame(axis)
-    a = axis / np.linalg.norm(axis)
-    cos_t = 1.0 - rng.random(n) * (1.0 - math.cos(radius))
-    sin_t = np.sqrt(1.0 - cos_t ** 2)
-    phi = rng.uniform(0.0, 2.0 * np.pi, n)
-    return cos_t[:, None] * a + (sin_t * np.cos(phi))[:, None] * e1 + (sin_t * np.sin(phi))[:, None] * e2
-
-
 # 0.1 rad: a wide light, whose rays drift by several columns over the scene (the
 # drift terms of the caps are what keep those answers).
 @pytest.mark.parametrize("half_angle", [SUN_HALF_ANGLE, 0.0, 0.1])
@@ -115,7 +106,7 @@ def test_shadow_rays_towards_the_sun_keep_their_answers_in_fewer_steps(name, hal
     plain, aimed = SphereTracer(TREES[name], max_steps=64), _aimed(name, sun, half_angle, max_steps=64)
     rng = np.random.default_rng(4)
     pts, _ = _surface_points(plain, 4000, rng)
-    d = _disk(sun, half_angle, len(pts), rng)
+    d = disk_directions(sun, half_angle, len(pts), rng)
     O, D = _vec(pts, mi.Point3f), _vec(d, mi.Vector3f)
     a = plain.query(O, D, mi.Float(dr.inf), mi.Bool(True), any_hit=True)
     b = aimed.query(O, D, mi.Float(dr.inf), mi.Bool(True), any_hit=True)
@@ -140,7 +131,7 @@ def test_rays_off_the_sun_or_from_outside_the_box_are_not_helped():
     tracer = _aimed("arch", SUNS["low"])
     rng = np.random.default_rng(5)
     pts, _ = _surface_points(tracer, 4000, rng)
-    off = _disk(SUNS["low"], 1.0 * SUN_HALF_ANGLE, len(pts), rng)
+    off = disk_directions(SUNS["low"], 1.0 * SUN_HALF_ANGLE, len(pts), rng)
     # Tilt every direction 2 sun radii further off the axis.
     e1, _ = sun_frame(SUNS["low"])
     d = off + math.tan(2.0 * SUN_HALF_ANGLE) * e1

@@ -68,7 +68,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-__all__ = ["SUN_HALF_ANGLE", "SunColumns", "scene_sun"]
+__all__ = ["SUN_HALF_ANGLE", "SunColumns", "disk_directions", "scene_sun", "sun_frame"]
 
 #: The sun's angular radius in Mitsuba's ``sunsky`` (half its 0.5338 degree aperture),
 #: in radians; a ray within it of the sun's axis is a sun ray.
@@ -100,6 +100,18 @@ def sun_frame(a):
     e1 = np.cross(a, helper)
     e1 /= np.linalg.norm(e1)
     return e1, np.cross(a, e1)
+
+
+def disk_directions(axis, radius, n, rng):
+    """``n`` unit directions uniform in the cone of half-angle ``radius`` around ``axis``
+    (the sun's disk as the emitter samples it), numpy ``(n, 3)``; ``rng`` a numpy Generator."""
+    a = np.asarray(axis, np.float64)
+    a = a / np.linalg.norm(a)
+    e1, e2 = sun_frame(a)
+    cos_t = 1.0 - rng.random(n) * (1.0 - math.cos(radius))
+    sin_t = np.sqrt(np.maximum(1.0 - cos_t ** 2, 0.0))
+    phi = 2.0 * np.pi * rng.random(n)
+    return cos_t[:, None] * a + (sin_t * np.cos(phi))[:, None] * e1 + (sin_t * np.sin(phi))[:, None] * e2
 
 
 class SunColumns:
