@@ -122,6 +122,26 @@ def test_poisson_thinning_keeps_the_minimum_distance():
     assert d2.max() < 0.5
 
 
+
+@pytest.mark.parametrize("dim, radius", [(2, 0.3), (3, 0.5), (3, 2.0)])
+def test_poisson_thinning_is_the_greedy_pass_in_the_random_order(dim, radius):
+    # Brute force: candidate i (in the generator's order) is kept iff no kept point
+    # lies within radius. A cliff-like stack (many candidates in one column, spread
+    # in z) and points on cell boundaries exercise the grid's neighbour runs.
+    rng = np.random.default_rng(dim)
+    P = rng.random((1500, dim)) * 6.0
+    P[:300, :2] = 3.0 + 0.2 * rng.random((300, 2))
+    if dim == 3:
+        P[:300, 2] = 20.0 * rng.random(300)
+    P[300:400] = np.round(P[300:400] / radius) * radius
+    keep = poisson_thin(P, radius, np.random.default_rng(7))
+    order = np.random.default_rng(7).permutation(len(P))
+    kept = []
+    for i in order:
+        if all(np.sum((P[i] - P[j]) ** 2) > radius * radius for j in kept):
+            kept.append(i)
+    np.testing.assert_array_equal(keep, np.sort(kept))
+
 # -- accessibility -----------------------------------------------------------------------------
 def _cliff_with_cave():
     import trimesh
