@@ -85,6 +85,35 @@ def test_tiles_stitch_into_one_marching_cubes_of_the_grid():
     assert triangles(md.vertices, md.faces.astype(np.int64)) == triangles(v, f)
 
 
+def test_marching_cubes_in_threads_equals_one_call():
+    """Runs cut into chunks meshed in threads give the single call's vertices, keys,
+    faces and declined runs bit for bit (faces and declined indices offset)."""
+    from arches_render.generators.terrain import banded_kernels
+    rng = np.random.default_rng(1)
+    x = np.linspace(-6, 6, 81)
+    X, Y, Z = np.meshgrid(x, x, np.linspace(-2, 2, 30), indexing="ij")
+    # Smooth relief (plain cases) with a few noisy patches (runs declined to scikit-image).
+    noisy = (np.abs(X - 2) < 0.6) & (np.abs(Y + 3) < 0.6)
+    vol = (np.sin(X) + np.cos(1.3 * Y) - 1.5 * Z + 0.8 * noisy * rng.normal(size=X.shape)).astype(np.float32)
+    nx, ny, nz = vol.shape
+    i0, j0, sx, sy, c0, c1 = banded_kernels.tile_crossing_runs(vol, 8).T
+    runs = np.stack([(i0 * ny + j0) * nz + c0, np.full_like(i0, ny * nz), np.full_like(i0, nz), sx, sy,
+                     c1 - c0 + 2, i0, j0, c0, i0, i0 + sx - 1, j0, j0 + sy - 1], axis=1)
+    flat = vol.reshape(-1)
+    args = (ny, nz, tiled_mc.DELTA, 0.0, 1, False, *lewiner.lewiner_luts())
+    one = lewiner.plain_runs(flat, runs, *args)
+    declined = one[5]
+    assert len(runs) >= 90 and 0 < len(declined) < len(runs) // 4 and len(one[3]) > 10000
+    for workers in (2, 3):
+        parts = lewiner.plain_runs_chunked(flat, runs, *args, workers=workers, min_cubes=0)
+        assert len(parts) == 4 * workers
+        nv = np.cumsum([0] + [len(p[0]) for _, p in parts])
+        for field in (0, 1, 2, 4):
+            np.testing.assert_array_equal(one[field], np.concatenate([p[field] for _, p in parts]))
+        np.testing.assert_array_equal(one[3], np.concatenate([p[3] + v for (_, p), v in zip(parts, nv)]))
+        np.testing.assert_array_equal(one[5], np.concatenate([p[5] + first for first, p in parts]))
+
+
 def test_run_keys_recompute_scikit_image_positions_bit_for_bit():
     """Edge vertices' positions are recomputed from the grid values as scikit-image
     computes them (``float32(k + v0 / (v0 - v1))``): equal bit for bit at origin 0,

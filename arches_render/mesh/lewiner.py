@@ -38,7 +38,7 @@ import numpy as np
 from skimage.measure import _marching_cubes_lewiner as _lewiner
 from skimage.measure import _marching_cubes_lewiner_luts as _luts
 
-__all__ = ["PLAIN", "lewiner_tables", "lewiner_luts", "plain_runs", "plain_volume"]
+__all__ = ["PLAIN", "lewiner_tables", "lewiner_luts", "plain_runs", "plain_runs_chunked", "plain_volume"]
 
 #: Lewiner's cases whose tiling is a fixed table (no face or interior test).
 PLAIN = (1, 2, 5, 8, 9, 11, 14)
@@ -406,6 +406,47 @@ def plain_runs(flat, runs, ny, nz, delta, level, step, exact, cases, til, ntri, 
         for ax in range(3):  # (x, y, z) -> array axes (i, j, k), as its np.fliplr
             normals[q, 2 - ax] = np.float32(np.float64(acc[q, ax]) * length)
     return g[:nv], keys[:nv], share[:nv], faces[:nf], normals, declined[:nd]
+
+
+def plain_runs_chunked(flat, runs, *args, workers=None, min_cubes=1 << 20):
+    """:func:`plain_runs` on contiguous chunks of ``runs``, in threads.
+
+    A run's vertices and faces depend on its own values only, and the kernel
+    appends them in run order (vertex numbers offset by those before it), so the
+    chunks' outputs, concatenated with their faces offset by the vertices of the
+    chunks before and their declined runs by the chunk's first run, are the single
+    call's arrays bit for bit. The kernel releases the GIL (``nogil``); chunks are
+    cut at equal shares of the runs' cubes. The caller concatenates (once: the
+    arrays are large).
+
+    Parameters
+    ----------
+    flat, runs, *args
+        As :func:`plain_runs`.
+    workers : int, optional
+        Threads (default: the CPUs this process may use).
+    min_cubes : int
+        Below this many cubes in all, one call (threads would cost more than they save).
+
+    Returns
+    -------
+    list of (int, tuple)
+        ``(first run, plain_runs output)`` per chunk, in run order.
+    """
+    import os
+    from concurrent.futures import ThreadPoolExecutor
+    workers = int(workers or len(os.sched_getaffinity(0)) or 1)
+    work = np.cumsum(runs[:, 3] * runs[:, 4] * runs[:, 5])
+    if workers <= 1 or len(runs) < 8 * workers or work[-1] < min_cubes:
+        return [(0, plain_runs(flat, runs, *args))]
+    # Four chunks a thread: a chunk of slow runs (ambiguous cubes, tall cliffs) then
+    # delays the end by a quarter of a thread's share, not by all of it.
+    chunks = 4 * workers
+    cuts = np.searchsorted(work, work[-1] * np.arange(1, chunks) / chunks)
+    bounds = [0, *sorted(set(int(c) for c in cuts if 0 < c < len(runs))), len(runs)]
+    with ThreadPoolExecutor(workers) as pool:
+        parts = pool.map(lambda c: plain_runs(flat, runs[c[0]:c[1]], *args), zip(bounds[:-1], bounds[1:]))
+        return list(zip(bounds[:-1], parts))
 
 
 #: ``v`` number of the corner with bit index ``4 dz + 2 dy + dx`` (scikit-image's ``vv``).

@@ -74,11 +74,12 @@ def tile_levels(tile, ntx, nty, nz, K0, K1, boxes):
     return occ, count, idx
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, parallel=True)
 def window_mask(win, off, tile, nty, K0, K1, boxes, ptr, idx, mask):
-    """Mark each window's band voxels in the flat ``mask``; returns the band count."""
+    """Mark each window's band voxels in the flat ``mask``; returns the band count.
+    (Windows are disjoint in ``mask``: they are marked in parallel.)"""
     band = 0
-    for w in range(win.shape[0]):
+    for w in numba.prange(win.shape[0]):
         i0, j0, sx, sy, k0, sz = win[w, 0], win[w, 1], win[w, 2], win[w, 3], win[w, 4], win[w, 5]
         o = off[w]
         for m in range(K0.shape[0]):
@@ -139,11 +140,12 @@ def _direct_value(x, y, z, hc, kind, P, boxes):
     return f
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, parallel=True)
 def direct_fill(vol, mask, win, off, direct, h, lo, voxel, kind, P, boxes):
-    """Closed-form values of the band voxels of direct columns; returns their count."""
+    """Closed-form values of the band voxels of direct columns; returns their count.
+    (Windows are disjoint in ``vol``: they are filled in parallel.)"""
     count = 0
-    for w in range(win.shape[0]):
+    for w in numba.prange(win.shape[0]):
         i0, j0, sx, sy, k0, sz = win[w, 0], win[w, 1], win[w, 2], win[w, 3], win[w, 4], win[w, 5]
         for di in range(sx):
             for dj in range(sy):
@@ -162,25 +164,44 @@ def direct_fill(vol, mask, win, off, direct, h, lo, voxel, kind, P, boxes):
     return count
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
+def _evaluated(vol, mask, d, q):
+    """Whether the band voxel at flat ``q`` is left to the tree (not direct, or NaN)."""
+    return mask[q] and (not d or vol[q] != vol[q])
+
+
+@numba.njit(cache=True, parallel=True)
 def to_evaluate(vol, mask, win, off, direct):
-    """Flat positions and grid indices ``(N, 3)`` of the band voxels the tree evaluates
-    (non-direct columns, and direct values left as NaN)."""
-    pos = np.empty(len(vol), dtype=np.int64)
-    n = 0
-    for w in range(win.shape[0]):
-        i0, j0, sx, sy, sz = win[w, 0], win[w, 1], win[w, 2], win[w, 3], win[w, 5]
+    """Flat positions (ascending) and grid indices ``(N, 3)`` of the band voxels the
+    tree evaluates (non-direct columns, and direct values left as NaN). Two passes
+    over the windows in parallel: counts, then each window's entries at its offset."""
+    nw = win.shape[0]
+    count = np.zeros(nw + 1, dtype=np.int64)
+    for w in numba.prange(nw):
+        sx, sy, sz = win[w, 2], win[w, 3], win[w, 5]
+        c = 0
+        for di in range(sx):
+            for dj in range(sy):
+                d = direct[win[w, 0] + di, win[w, 1] + dj]
+                base = off[w] + (di * sy + dj) * sz
+                for dk in range(sz):
+                    c += _evaluated(vol, mask, d, base + dk)
+        count[w + 1] = c
+    start = np.cumsum(count)
+    pos = np.empty(start[-1], dtype=np.int64)
+    ijk = np.empty((start[-1], 3), dtype=np.int64)
+    for w in numba.prange(nw):
+        i0, j0, sx, sy, k0, sz = win[w, 0], win[w, 1], win[w, 2], win[w, 3], win[w, 4], win[w, 5]
+        n = start[w]
         for di in range(sx):
             for dj in range(sy):
                 d = direct[i0 + di, j0 + dj]
                 base = off[w] + (di * sy + dj) * sz
                 for dk in range(sz):
-                    q = base + dk
-                    if mask[q] and (not d or vol[q] != vol[q]):
-                        pos[n] = q
+                    if _evaluated(vol, mask, d, base + dk):
+                        pos[n] = base + dk
+                        ijk[n, 0], ijk[n, 1], ijk[n, 2] = i0 + di, j0 + dj, k0 + dk
                         n += 1
-    pos = pos[:n]
-    ijk = _ijk(pos, win, off)
     return pos, ijk
 
 
@@ -200,15 +221,17 @@ def _ijk(pos, win, off):
     return ijk
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, parallel=True)
 def fill_gaps(vol, mask, win, off, voxel):
     """Give each window column's non-band voxels ``+-voxel`` with the sign of the
     nearest band voxel below (above for the lowest run); returns the flat start and
-    grid index of the window columns without band voxels (one evaluation each)."""
-    starts = np.empty(len(vol), dtype=np.int64)
-    n = 0
-    for w in range(win.shape[0]):
+    grid index of the window columns without band voxels (one evaluation each), in
+    ascending order. (Windows in parallel: a pass that fills and counts, one that lists.)"""
+    nw = win.shape[0]
+    count = np.zeros(nw + 1, dtype=np.int64)
+    for w in numba.prange(nw):
         sx, sy, sz = win[w, 2], win[w, 3], win[w, 5]
+        empty = 0
         for c in range(sx * sy):
             base = off[w] + c * sz
             first = -1
@@ -222,10 +245,23 @@ def fill_gaps(vol, mask, win, off, voxel):
                             vol[base + q] = last
                 elif first >= 0:
                     vol[base + k] = last
-            if first < 0:
+            empty += first < 0
+        count[w + 1] = empty
+    start = np.cumsum(count)
+    starts = np.empty(start[-1], dtype=np.int64)
+    for w in numba.prange(nw):
+        sz = win[w, 5]
+        n = start[w]
+        for c in range(win[w, 2] * win[w, 3]):
+            base = off[w] + c * sz
+            banded = False
+            for k in range(sz):
+                if mask[base + k]:
+                    banded = True
+                    break
+            if not banded:
                 starts[n] = base
                 n += 1
-    starts = starts[:n]
     return starts, _ijk(starts, win, off)
 
 
@@ -270,21 +306,31 @@ def _append_runs(out, n, cross, head):
     return out, n
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, parallel=True)
 def crossing_runs(vol, win, off):
     """Runs ``(w, c0, c1)`` of consecutive cube layers of window ``w`` holding a cube
-    whose corners do not all share a sign (levels ``c0 .. c1 + 1`` of the window)."""
-    out = np.empty((16, 3), dtype=np.int64)
-    n = 0
-    head = np.empty(1, dtype=np.int64)
-    for w in range(win.shape[0]):
+    whose corners do not all share a sign (levels ``c0 .. c1 + 1`` of the window),
+    by window. (Windows in parallel: their crossing layers, then the runs in order.)"""
+    nw = win.shape[0]
+    lstart = np.zeros(nw + 1, dtype=np.int64)
+    for w in range(nw):
+        lstart[w + 1] = lstart[w] + win[w, 5]
+    cross = np.zeros(lstart[-1], dtype=np.bool_)
+    count = np.zeros(nw + 1, dtype=np.int64)
+    for w in numba.prange(nw):
         sx, sy, sz = win[w, 2], win[w, 3], win[w, 5]
         v = vol[off[w]:off[w + 1]].reshape((sx, sy, sz))
-        cross = np.zeros(sz, dtype=np.bool_)
-        _crossing_layers(v, 0, sx - 1, 0, sy - 1, cross)
-        head[0] = w
-        out, n = _append_runs(out, n, cross, head)
-    return out[:n]
+        layers = cross[lstart[w]:lstart[w + 1]]
+        _crossing_layers(v, 0, sx - 1, 0, sy - 1, layers)
+        runs = 0
+        for k in range(sz - 1):
+            runs += layers[k] and (k == 0 or not layers[k - 1])
+        count[w + 1] = runs
+    start = np.cumsum(count)
+    out = np.empty((start[-1], 3), dtype=np.int64)
+    for w in numba.prange(nw):  # (each window's slice holds exactly its runs)
+        _append_runs(out[start[w]:start[w + 1]], 0, cross[lstart[w]:lstart[w + 1]], np.full(1, w, dtype=np.int64))
+    return out
 
 
 @numba.njit(cache=True)

@@ -36,7 +36,7 @@ import numba
 import numpy as np
 from skimage.measure import marching_cubes
 
-from arches_render.mesh.lewiner import lewiner_luts, plain_runs
+from arches_render.mesh.lewiner import lewiner_luts, plain_runs_chunked
 from arches_render.mesh.polygonize import TriangleMesh, oriented_mesh
 
 __all__ = ["TILE", "DELTA", "mesh_runs"]
@@ -186,11 +186,19 @@ def mesh_runs(node, flat, runs, shape, lo, voxel, normals=True) -> TriangleMesh:
     """
     ny, nz = int(shape[1]), int(shape[2])
     # The plain cases compiled (arches_render.mesh.lewiner), keyed positions at level 0.
-    g, keys, share, f, _, declined = plain_runs(flat, runs, ny, nz, DELTA, 0.0, 1, False, *lewiner_luts())
-    verts, faces, keyl, shares, nv = [g], [f], [keys], [share], len(g)
+    # (in threads over chunks of runs: the single call's arrays once concatenated)
+    verts, faces, keyl, shares, nv, declined = [], [], [], [], 0, []
+    for first, (g, keys, share, f, _, dec) in plain_runs_chunked(flat, runs, ny, nz, DELTA, 0.0, 1, False,
+                                                                 *lewiner_luts()):
+        verts.append(g)
+        keyl.append(keys)
+        shares.append(share)
+        faces.append(f + np.int32(nv) if nv else f)
+        nv += len(g)
+        declined.extend((dec + first).tolist())
     # The runs with face or interior tests, through scikit-image (after the plain
     # ones: the same order for the banded and the dense mesh).
-    for r in declined.tolist():
+    for r in declined:
         base, si, sj, sx, sy, sz, oi, oj, ok, *box = runs[r].tolist()
         vt = np.lib.stride_tricks.as_strided(flat[base:], (sx, sy, sz), (4 * si, 4 * sj, 4), writeable=False)
         vt = np.ascontiguousarray(vt)
