@@ -206,6 +206,38 @@ def test_lakes_at_spill_level_and_no_flooded_canyon_floor():
     assert find_water(canyon, 0.0).lakes == []
 
 
+def test_water_quads_cover_each_wet_cell_once_at_its_level_in_maximal_runs():
+    from arches_render.generators.terrain.water import WaterBodies, water_mesh
+    rng = np.random.default_rng(3)
+    ny, nx = 40, 57
+    level = np.where(rng.random((ny, nx)) < 0.5, rng.choice([2.0, 5.0], (ny, nx)), np.nan)
+    level[7] = np.nan  # a dry row of samples
+    w = WaterBodies(level, np.zeros((ny, nx), bool), None, [(5.0, 1)])
+    dx, dy = 1.5, 2.0
+    m = water_mesh(w, (10.0, -4.0, 10.0 + dx * (nx - 1), -4.0 + dy * (ny - 1)))
+    # Expected cell levels: a cell is water at its highest wet corner, after the lakes'
+    # one-cell growth (water_mesh's own rule, restated on the samples).
+    lev = np.where(np.isfinite(level), level, -np.inf)
+    from scipy import ndimage
+    grown = np.where(np.isfinite(level), lev, ndimage.grey_dilation(lev, size=(3, 3)))
+    corners = np.stack([grown[:-1, :-1], grown[:-1, 1:], grown[1:, :-1], grown[1:, 1:]]).max(axis=0)
+    got = np.full(corners.shape, -np.inf)
+    V, F = m.vertices, m.faces.reshape(-1, 2, 3)
+    assert np.all(F[:, 1] - F[:, 0] == [0, 1, 1])  # two triangles a quad
+    for quad in F[:, 0]:
+        (xa, ya, z), (xb, _, _), (_, yb, _) = V[quad]
+        k0, k1 = int(round((xa - 10.0) / dx)), int(round((xb - 10.0) / dx))
+        j = int(round((ya + 4.0) / dy))
+        assert round((yb + 4.0) / dy) == j + 1 and k1 > k0
+        assert np.all(np.isneginf(got[j, k0:k1])), "a cell covered twice"
+        got[j, k0:k1] = z
+        # Maximal: the cells on either side are dry or at another level.
+        for k in (k0 - 1, k1):
+            if 0 <= k < nx - 1:
+                assert corners[j, k] != z
+    np.testing.assert_array_equal(got, corners)
+
+
 def test_legibility_rejects_a_slope_that_fills_the_frame_and_keeps_a_landscape():
     """``shots.legibility`` on two ray grids: a plane seen square on (one sheet, no sky,
     little depth) is not legible; a view over receding ground with a block in front and

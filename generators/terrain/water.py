@@ -148,26 +148,24 @@ def water_mesh(water: WaterBodies, extent, sea_reach_cells=2):
     corners = np.stack([lev[:-1, :-1], lev[:-1, 1:], lev[1:, :-1], lev[1:, 1:]])
     cell_lev = corners.max(axis=0)
     cell_wet = np.isfinite(cell_lev)
-    V, F = [], []
-    n = 0
-    for j in range(ny - 1):
-        row, lv = cell_wet[j], cell_lev[j]
-        if not row.any():
-            continue
-        # Runs of wet cells at one level.
-        edges = np.flatnonzero(np.diff(np.concatenate([[False], row, [False]]).astype(int)) != 0)
-        for a, b in zip(edges[::2], edges[1::2]):
-            k = a
-            while k < b:
-                e = k + 1
-                while e < b and lv[e] == lv[k]:
-                    e += 1
-                z = float(lv[k])
-                xa, xb, ya, yb = x0 + k * dx, x0 + e * dx, y0 + j * dy, y0 + (j + 1) * dy
-                V += [(xa, ya, z), (xb, ya, z), (xb, yb, z), (xa, yb, z)]
-                F += [(n, n + 1, n + 2), (n, n + 2, n + 3)]
-                n += 4
-                k = e
-    if not F:
+    # One quad per run of wet cells at one level along a row, rows in order: a run
+    # starts at a wet cell whose left neighbour is dry or at another level, and ends
+    # before the next start or dry cell (each row padded with one dry cell).
+    rows, cols = cell_wet.shape
+    wet = np.concatenate([cell_wet, np.zeros((rows, 1), bool)], axis=1).ravel()
+    lv = np.concatenate([np.nan_to_num(cell_lev, nan=0.0), np.zeros((rows, 1))], axis=1).ravel()
+    prev_wet = np.concatenate([[False], wet[:-1]])
+    start = wet & ~(prev_wet & (lv == np.concatenate([[0.0], lv[:-1]])))
+    if not start.any():
         return None
-    return trimesh.Trimesh(np.array(V, np.float64), np.array(F, np.int64), process=False)
+    first = np.flatnonzero(start)
+    stop = np.flatnonzero(start | ~wet)
+    last = stop[np.searchsorted(stop, first, side="right")]  # (a row's padding cell stops every run)
+    j, k = np.divmod(first, cols + 1)
+    e = last - j * (cols + 1)
+    xa, xb, ya, yb, z = x0 + k * dx, x0 + e * dx, y0 + j * dy, y0 + (j + 1) * dy, lv[first]
+    V = np.stack([np.stack([xa, ya, z], 1), np.stack([xb, ya, z], 1), np.stack([xb, yb, z], 1),
+                  np.stack([xa, yb, z], 1)], 1).reshape(-1, 3)
+    n = 4 * np.arange(len(first))[:, None]
+    F = np.stack([n + [0, 1, 2], n + [0, 2, 3]], 1).reshape(-1, 3)
+    return trimesh.Trimesh(V, F.astype(np.int64), process=False)
