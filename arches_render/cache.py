@@ -28,7 +28,12 @@ Concurrency
     the same bits, the tile is built once, and the folder holds one entry. The
     kernel drops the lock of a killed process, so a kill never blocks the next run;
     the killed builder's temporary file is removed by the next write
-    (:func:`arches_render.atomic.sweep_stale`).
+    (:func:`arches_render.atomic.sweep_stale`). One process never waits: a
+    multiprocessing worker still importing its parent's main script (a script
+    without ``if __name__ == "__main__":``, re-run there by multiprocessing's rule)
+    whose entry is locked, most likely by that parent waiting for it; it raises, the
+    parent's pool breaks, and the parent builds the entry itself (the rock tiles'
+    fallback) instead of both hanging.
 """
 
 from __future__ import annotations
@@ -159,6 +164,17 @@ def report(message: str) -> None:
     print(f"arches-render: cache: {message}", file=sys.stderr, flush=True)
 
 
+def _importing_parents_main() -> bool:
+    """Whether this process is a multiprocessing worker still importing its parent's
+    main script (a script without ``if __name__ == "__main__":`` runs again there).
+
+    The standard library's own test (``multiprocessing.spawn._check_not_importing_main``
+    reads the same flag); there is no public one.
+    """
+    import multiprocessing.process
+    return bool(getattr(multiprocessing.process.current_process(), "_inheriting", False))
+
+
 @contextlib.contextmanager
 def _locked(path: Path):
     """Hold an exclusive lock for building entry ``path`` (no lock where the folder cannot be written)."""
@@ -172,7 +188,16 @@ def _locked(path: Path):
         yield  # a read-only cache: no entry will be written, nothing to guard
         return
     try:
-        fcntl.flock(fd, fcntl.LOCK_EX)
+        if _importing_parents_main():
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                # Its parent, which started this worker, may hold the lock while it
+                # waits for the worker: waiting here would hang both for ever.
+                raise RuntimeError(f"{path}: a worker process re-running its parent's unguarded main "
+                                   "script would wait for the parent's cache lock") from None
+        else:
+            fcntl.flock(fd, fcntl.LOCK_EX)
         faults.point("cache.locked")  # test-only kill point (arches_render.faults)
         yield
     finally:

@@ -404,3 +404,28 @@ def test_a_script_without_a_main_guard_gets_its_tiles_and_a_warning_not_a_hang(t
     assert out.stdout.strip().splitlines()[-1].endswith(" True"), out.stdout
     remedy = "its top level is not guarded: guard it with 'if __name__ == \"__main__\":'"
     assert remedy in out.stderr, out.stderr[-2000:]
+
+
+def test_an_unguarded_script_building_tiles_through_the_cache_does_not_wait_on_itself(tmp_path):
+    """The cache's builder holds the entry's lock while its workers run; a worker that
+    re-runs an unguarded script asks for the same entry. It must not wait for that lock
+    (the parent waits for it: both hung for ever, found rendering a rock pile scene from
+    a script); it stops, and the parent builds the tiles itself, with the warning."""
+    import subprocess
+    import sys
+    script = tmp_path / "unguarded_cache.py"
+    script.write_text(
+        "import sys\n"
+        "from arches_render.generators.rocks import tile_cache\n"
+        "from arches_render.generators.rocks.seed_points import SeedParams\n"
+        "from arches_render.generators.rocks.tile_params import ErosionParams, TileParams\n"
+        "p = TileParams(n=4, voxels_per_cell=6, seed=5, seeds=SeedParams(g_max=4.0, alpha=(0.6, 1.6)),\n"
+        "               erosion=ErosionParams(steps=6))\n"
+        "store, where = tile_cache.load_or_build(p, folder=sys.argv[1], workers=2)\n"
+        "print('tiles', len(store), where)\n")
+    out = subprocess.run([sys.executable, str(script), str(tmp_path / "cache")], capture_output=True, text=True,
+                         timeout=240, cwd=tmp_path)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip().splitlines()[-1].endswith(" built"), out.stdout
+    assert "guard it with 'if __name__ == \"__main__\":'" in out.stderr, out.stderr[-2000:]
+    assert "would wait for the parent's cache lock" in out.stderr
