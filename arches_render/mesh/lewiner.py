@@ -424,7 +424,8 @@ def plain_runs_chunked(flat, runs, *args, workers=None, min_cubes=1 << 20):
     flat, runs, *args
         As :func:`plain_runs`.
     workers : int, optional
-        Threads (default: the CPUs this process may use).
+        Threads (default: numba's, ``numba.get_num_threads()``, as its parallel
+        kernels: 1 in a process that asked numba for one thread).
     min_cubes : int
         Below this many cubes in all, one call (threads would cost more than they save).
 
@@ -433,9 +434,8 @@ def plain_runs_chunked(flat, runs, *args, workers=None, min_cubes=1 << 20):
     list of (int, tuple)
         ``(first run, plain_runs output)`` per chunk, in run order.
     """
-    import os
     from concurrent.futures import ThreadPoolExecutor
-    workers = int(workers or len(os.sched_getaffinity(0)) or 1)
+    workers = int(workers or numba.get_num_threads())
     work = np.cumsum(runs[:, 3] * runs[:, 4] * runs[:, 5])
     if workers <= 1 or len(runs) < 8 * workers or work[-1] < min_cubes:
         return [(0, plain_runs(flat, runs, *args))]
