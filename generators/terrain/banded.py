@@ -404,7 +404,7 @@ def sample_banded(node: Node, voxel: float, stats: BandStats | None = None, prog
 
     def values(ijk):
         """Field values of the tree at grid indices (the dense grid's points exactly)."""
-        pts = lo + ijk * voxel
+        pts = K.grid_points(ijk, lo, voxel)
         batch = 1 << 21
         out = np.empty(len(pts), dtype=np.float32)
         for s in range(0, len(pts), batch):

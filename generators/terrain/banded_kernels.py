@@ -205,6 +205,17 @@ def to_evaluate(vol, mask, win, off, direct):
     return pos, ijk
 
 
+@numba.njit(cache=True, parallel=True)
+def grid_points(ijk, lo, voxel):
+    """``float32(lo + ijk voxel)`` (the sum in double, as numpy's ``lo + ijk * voxel``
+    rounded to float32 by :func:`~arches_render.field.node.evaluate`): the grid's points."""
+    pts = np.empty(ijk.shape, dtype=np.float32)
+    for q in numba.prange(ijk.shape[0]):
+        for a in range(3):
+            pts[q, a] = np.float32(lo[a] + np.float64(ijk[q, a]) * voxel)
+    return pts
+
+
 @numba.njit(cache=True)
 def _ijk(pos, win, off):
     """Grid indices of ascending flat positions."""
