@@ -141,6 +141,8 @@ def test_poisson_thinning_is_the_greedy_pass_in_the_random_order(dim, radius):
         if all(np.sum((P[i] - P[j]) ** 2) > radius * radius for j in kept):
             kept.append(i)
     np.testing.assert_array_equal(keep, np.sort(kept))
+    with pytest.raises(ValueError, match="finite"):
+        poisson_thin(np.array([[0.0, 0.0, np.nan]])[:, :dim], radius, rng)
 
 # -- accessibility -----------------------------------------------------------------------------
 def _cliff_with_cave():

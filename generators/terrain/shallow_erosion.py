@@ -161,6 +161,8 @@ def poisson_thin(points, radius, rng):
     n = len(P)
     if n == 0:
         return np.zeros(0, dtype=np.int64)
+    if not np.isfinite(P).all():
+        raise ValueError("poisson_thin: the candidates must be finite points")
     P3 = np.zeros((n, 3))
     P3[:, :P.shape[1]] = P
     span = float(np.max(P3.max(axis=0) - P3.min(axis=0)))
