@@ -142,7 +142,7 @@ def test_poisson_thinning_is_the_greedy_pass_in_the_random_order(dim, radius):
             kept.append(i)
     np.testing.assert_array_equal(keep, np.sort(kept))
     with pytest.raises(ValueError, match="finite"):
-        poisson_thin(np.array([[0.0, 0.0, np.nan]])[:, :dim], radius, rng)
+        poisson_thin(np.full((1, dim), np.nan), radius, rng)
 
 # -- accessibility -----------------------------------------------------------------------------
 def _cliff_with_cave():
