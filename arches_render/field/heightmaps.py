@@ -388,7 +388,7 @@ def read_dem(path, max_samples=DEFAULT_MAX_SAMPLES, nodata=None, encoding=None):
         cell = georef.cell_m
     if cell is not None:
         cell = (cell[0] * step, cell[1] * step)
-    if float(H.max() - H.min()) == 0.0:
+    if H.max() == H.min():  # (a difference overflows for heights near the float32 limits)
         notes.append("the DEM is flat (all heights equal)")
     return DEM(H, path, shape, step, normalised, filled, notes, cell, georef)
 
