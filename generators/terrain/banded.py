@@ -483,7 +483,7 @@ def polygonize_dense(node: Node, voxel: float | None = None, normals: bool = Tru
     for i in range(0, nx, step):
         ii = np.arange(i, min(i + step, nx))
         idx = np.concatenate([np.repeat(ii, len(jk))[:, None], np.tile(jk, (len(ii), 1))], axis=1)
-        vol[i:i + len(ii)] = evaluate(node, grid.lo + idx * voxel).reshape(len(ii), ny, nz)
+        vol[i:i + len(ii)] = evaluate(node, K.grid_points(idx, grid.lo, voxel)).reshape(len(ii), ny, nz)
     i0, j0, sx, sy, c0, c1 = K.tile_crossing_runs(vol, TILE).T
     runs = np.stack([(i0 * ny + j0) * nz + c0, np.full_like(i0, ny * nz), np.full_like(i0, nz), sx, sy,
                      c1 - c0 + 2, i0, j0, c0, i0, i0 + sx - 1, j0, j0 + sy - 1], axis=1)

@@ -153,7 +153,7 @@ def water_mesh(water: WaterBodies, extent, sea_reach_cells=2):
     # before the next start or dry cell (each row padded with one dry cell).
     rows, cols = cell_wet.shape
     wet = np.concatenate([cell_wet, np.zeros((rows, 1), bool)], axis=1).ravel()
-    lv = np.concatenate([np.nan_to_num(cell_lev, nan=0.0), np.zeros((rows, 1))], axis=1).ravel()
+    lv = np.concatenate([cell_lev, np.zeros((rows, 1))], axis=1).ravel()  # (read only where wet)
     prev_wet = np.concatenate([[False], wet[:-1]])
     start = wet & ~(prev_wet & (lv == np.concatenate([[0.0], lv[:-1]])))
     if not start.any():
