@@ -20,8 +20,11 @@ a worker process importing one module of the package imports no more than it nee
                    ``item.shapes(bsdfs, progress=None)`` (Mitsuba shapes) and exports to
                    USD as ``item.point_instancer()`` (see
                    :func:`arches_render.mesh.usd_export.write_usd_stage`).
-``COMMANDS``       modules defining ``register(subparsers)``: ``arches-render``
-                   subcommands (see :mod:`arches_render.commands`).
+``COMMANDS``       names of the package's modules defining ``register(subparsers)``:
+                   ``arches-render`` subcommands (see :mod:`arches_render.commands`).
+                   Names, not modules: only the CLI imports them, so loading a scene
+                   does not import what a command needs (``amplify`` alone imports
+                   trimesh, scipy.optimize and numba: 0.56 s of every render process).
 and in its ``benchmarks.py`` (imported by :func:`benchmarks` only: a render or a
 worker process does not need them):
 
@@ -96,8 +99,9 @@ def scene_tables() -> dict:
 
 
 def commands() -> list:
-    """Command modules of every generator, in registry order."""
-    return [m for ext in extensions() for m in ext.commands]
+    """Command modules of every generator, in registry order (imported here, on first use)."""
+    return [importlib.import_module(f"arches_render.generators.{ext.name}.{name}")
+            for ext in extensions() for name in ext.commands]
 
 
 def benchmarks(core=()) -> dict:

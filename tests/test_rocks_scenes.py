@@ -197,6 +197,10 @@ def test_scene_meshes_carry_object_space_texture_coordinates(tmp_path, cache):
     shapes = [s for s in scene.shapes() if s.id().startswith("rock_pile0")]
     assert len(shapes) == len(desc.rock_piles[0].buffers())
     assert shapes and all(s.has_attribute("vertex_objp") for s in shapes)
+    # Each mesh carries its buffer's object-space positions, not the placeholder it was declared with.
+    for shape, buffer in zip(shapes, desc.rock_piles[0].buffers()):
+        np.testing.assert_array_equal(mi.traverse(shape)["vertex_objp"].numpy(), buffer["objp"].ravel())
+        assert np.ptp(buffer["objp"]) > 0
     assert desc.rock_piles[0].stats["instanced"] > 20
     img = render_image(scene, 4)
     assert img[12:20, 20:28].mean() > 0.01              # rocks in front of the camera, lit

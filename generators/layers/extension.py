@@ -10,8 +10,8 @@ from __future__ import annotations
 
 __all__ = ["NODE_TYPES", "SCENE_TABLES", "COMMANDS"]
 
-from . import command
 from .scene_nodes import NODE_TYPES
 
 SCENE_TABLES: dict = {}
-COMMANDS = (command,)
+# Module names, imported by the CLI only: a render does not pay for the commands' imports.
+COMMANDS = ("command",)

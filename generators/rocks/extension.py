@@ -10,9 +10,9 @@ from __future__ import annotations
 
 __all__ = ["NODE_TYPES", "SCENE_TABLES", "COMMANDS"]
 
-from . import command
 from .scene_piles import parse_rock_pile
 
 NODE_TYPES: dict = {}
 SCENE_TABLES = {"rock_piles": parse_rock_pile}
-COMMANDS = (command,)
+# Module names, imported by the CLI only: a render does not pay for the commands' imports.
+COMMANDS = ("command",)

@@ -40,12 +40,16 @@ def rock_meshes_mitsuba(buffers: list, bsdf, name: str = "rocks") -> list:
         props = mi.Properties()
         props["bsdf"] = bsdf
         mesh = mi.Mesh(f"{name}_{i}", len(b["positions"]), len(b["faces"]), props, has_vertex_normals=True)
+        # ``add_attribute`` takes a Python sequence, converted float by float (70 ms for
+        # 250k vertices from an mi.Float): it declares the attribute with zeros (a list,
+        # the fastest sequence), and the buffer itself goes in through ``traverse``.
+        mesh.add_attribute(OBJP_ATTRIBUTE, 3, [0.0] * (3 * len(b["positions"])))
         params = mi.traverse(mesh)
         params["vertex_positions"] = mi.Float(b["positions"].ravel())
         params["faces"] = mi.UInt32(b["faces"].ravel())
         params["vertex_normals"] = mi.Float(b["normals"].ravel())
+        params[OBJP_ATTRIBUTE] = mi.Float(b["objp"].ravel())
         params.update()
-        mesh.add_attribute(OBJP_ATTRIBUTE, 3, mi.Float(b["objp"].ravel()))
         out.append(mesh)
     dr.eval()
     return out

@@ -14,8 +14,6 @@ from pathlib import Path
 
 from arches_render import cache
 
-from .aperiodic_tiles import build_aperiodic_tiles
-from .periodic_tile import build_periodic_tile
 from .rock_store import FORMAT, RockStore
 from .tile_params import TileParams
 
@@ -39,8 +37,14 @@ def cache_key(params: TileParams) -> str:
 
 def build_tiles(params: TileParams, progress=None, workers: int | None = None) -> RockStore:
     """Build a tile set without the cache (aperiodic corner cubes or the periodic tile)."""
+    # The builders are imported here, on a miss: they import numba and scikit-image
+    # (0.25 s), which a scene whose tiles are in the cache never needs.
     if params.tiling == "periodic":
+        from .periodic_tile import build_periodic_tile
+
         return build_periodic_tile(params, progress)
+    from .aperiodic_tiles import build_aperiodic_tiles
+
     return build_aperiodic_tiles(params, progress, workers)
 
 

@@ -10,9 +10,9 @@ from __future__ import annotations
 
 __all__ = ["NODE_TYPES", "SCENE_TABLES", "COMMANDS"]
 
-from . import command
 from .far_field import parse_far_field
 from .scene_nodes import NODE_TYPES
 
 SCENE_TABLES = {"far_field": parse_far_field}
-COMMANDS = (command,)
+# Module names, imported by the CLI only: a render does not pay for the commands' imports.
+COMMANDS = ("command",)

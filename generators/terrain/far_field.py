@@ -54,7 +54,6 @@ from dataclasses import dataclass
 
 import mitsuba as mi
 import numpy as np
-import trimesh
 
 from arches_render.field import Heightfield
 
@@ -213,6 +212,8 @@ def far_field_mesh(node, reach=None):
     trimesh.Trimesh
         Upward-facing triangles with vertex normals.
     """
+    import trimesh  # on use: slow to import (0.3 s), only scenes with a far field need it
+
     H = np.asarray(node.heights_np, np.float64)
     ny, nx = H.shape
     x0, y0, x1, y1 = node.extent
@@ -324,6 +325,8 @@ def sea_ring_mesh(extent, level, reach, first=None):
     -------
     trimesh.Trimesh
     """
+    import trimesh  # on use: slow to import (0.3 s), only scenes with a far field need it
+
     x0, y0, x1, y1 = extent
     first = max(x1 - x0, y1 - y0) / 64.0 if first is None else float(first)
     V = []
