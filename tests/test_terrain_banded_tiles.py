@@ -173,3 +173,38 @@ def test_plain_cases_emit_scikit_image_triangles():
             assert triangles(g, f) == triangles(v, ff), (idx, trial)
             plain += 1
     assert plain > 300 and declined > 300
+
+
+def test_stitch_in_parts_equals_the_serial_merge_of_the_concatenation():
+    """The parallel stitch (parts never concatenated, blocks of 2^16 prefix-summed) gives
+    the serial definition's vertices and faces: shareable vertices of equal key merged
+    into the first in order, kept ones renumbered in order, faces repeating a vertex
+    dropped. Parts of unequal sizes, several blocks each, many merges and drops."""
+    rng = np.random.default_rng(4)
+    parts = []
+    for n in (150_000, 7, 90_000, 0, 70_000):
+        g = rng.random((n, 3)).astype(np.float32) * 100
+        keys = rng.integers(0, 60_000, n)        # ~1 in 3 of the shareable ones merge
+        share = rng.random(n) < 0.5
+        faces = rng.integers(0, max(n, 1), (2 * n, 3)).astype(np.int32)
+        parts.append((g, keys, share, faces))
+    lo = np.array([1.0, -2.0, 3.0])
+    v, f = tiled_mc._stitch(parts, 1.5, lo)
+    # The serial definition, on the concatenation.
+    first = np.cumsum([0] + [len(p[0]) for p in parts])
+    g = np.concatenate([p[0] for p in parts])
+    keys = np.concatenate([p[1] for p in parts])
+    share = np.concatenate([p[2] for p in parts])
+    faces = np.concatenate([p[3] + o for p, o in zip(parts, first[:-1])]).astype(np.int64)
+    rep = np.arange(len(g))
+    lead = {}
+    for q in np.flatnonzero(share):
+        rep[q] = lead.setdefault(int(keys[q]), q)
+    kept = rep == np.arange(len(g))
+    new = np.cumsum(kept) - 1
+    mapped = new[rep[faces]]
+    ok = (mapped[:, 0] != mapped[:, 1]) & (mapped[:, 1] != mapped[:, 2]) & (mapped[:, 0] != mapped[:, 2])
+    assert 0 < kept.sum() < len(g) and 0 < ok.sum() < len(ok)
+    np.testing.assert_array_equal(v, (g[kept].astype(np.float64) * 1.5 + lo).astype(np.float32))
+    np.testing.assert_array_equal(f, mapped[ok].astype(np.uint32))
+    assert f.dtype == np.uint32 and v.dtype == np.float32

@@ -241,12 +241,16 @@ def plain_runs(flat, runs, ny, nz, delta, level, step, exact, cases, til, ntri, 
     w = np.empty(8, dtype=np.float64)   # corner weights by bit index, and as float32
     w32 = np.empty(8, dtype=np.float64)
     cb = np.empty(3, dtype=np.float64)
+    eoff = np.empty(12, dtype=np.int64)
     stp = np.float64(step)
     for r in range(runs.shape[0]):
         base, si, sj, sx, sy, sz = runs[r, 0], runs[r, 1], runs[r, 2], runs[r, 3], runs[r, 4], runs[r, 5]
         oi, oj, ok, i0, i1, j0, j1 = runs[r, 6], runs[r, 7], runs[r, 8], runs[r, 9], runs[r, 10], runs[r, 11], runs[r, 12]
         nv0, nf0 = nv, nf
         fail = False
+        # An edge's slot is the slot of its cube's lower corner plus the edge's offset.
+        for e in range(12):
+            eoff[e] = ((edge_lo[e, 0] * sy + edge_lo[e, 1]) * sz + edge_lo[e, 2]) * 4 + edge_axis[e]
         _column_spans(flat, base, si, sj, sx, sy, sz, level, span)
         for i in range(sx - 1):
             for j in range(sy - 1):
@@ -278,6 +282,7 @@ def plain_runs(flat, runs, ny, nz, delta, level, step, exact, cases, til, ntri, 
                     faces = _grow(faces, nf + 4 * sz)
                 if nt + 24 * sz > touched.shape[0]:
                     touched = _grow(touched, nt + 24 * sz)
+                column_slot = (i * sy + j) * sz * 4
                 for k in range(k0, k1 + 1):
                     cur = nxt
                     nxt = ((flat[b00 + k + 1] > level) | ((flat[b01 + k + 1] > level) << 1)
@@ -292,7 +297,8 @@ def plain_runs(flat, runs, ny, nz, delta, level, step, exact, cases, til, ntri, 
                         fail = True
                         break
                     cfg = cases[idx, 1]
-                    row, n3 = til[case, cfg], 3 * ntri[case]
+                    # (the tables indexed in place: a row view per cube cost more than its use)
+                    tv, n3 = -1, 3 * ntri[case]
                     if exact:
                         for c in range(8):
                             q = b00 + corner[c, 0] * si + corner[c, 1] * sj + k + corner[c, 2]
@@ -309,13 +315,12 @@ def plain_runs(flat, runs, ny, nz, delta, level, step, exact, cases, til, ntri, 
                             if tv < 0:
                                 fail = True
                                 break
-                            row, n3 = amb_til[tv, cfg], 3 * amb_n[tv]
+                            n3 = 3 * amb_n[tv]
+                    cube_slot = column_slot + k * 4
                     for t3 in range(n3):
-                        e = row[t3]
-                        a = edge_axis[e]
-                        p[0], p[1], p[2] = i + edge_lo[e, 0], j + edge_lo[e, 1], k + edge_lo[e, 2]
+                        e = til[case, cfg, t3] if tv < 0 else amb_til[tv, cfg, t3]
                         # An edge's slot holds its vertex (or the grid point's it snapped to).
-                        slot = ((p[0] * sy + p[1]) * sz + p[2]) * 4 + a
+                        slot = cube_slot + eoff[e]
                         if exact:
                             # scikit-image's Cell._add_face_from_edge_index: the corners' weights
                             # 1 / (eps + |v|), in the edge's table order (its sums' order).
@@ -345,6 +350,8 @@ def plain_runs(flat, runs, ny, nz, delta, level, step, exact, cases, til, ntri, 
                             for ax in range(3):
                                 acc[q, ax] += np.float32(vg[c2, ax] * s2)
                         elif table[slot] < 0:
+                            a = edge_axis[e]
+                            p[0], p[1], p[2] = i + edge_lo[e, 0], j + edge_lo[e, 1], k + edge_lo[e, 2]
                             touched[nt] = slot
                             nt += 1
                             q0 = base + p[0] * si + p[1] * sj + p[2]

@@ -134,36 +134,130 @@ def _run_keys(v, vt, origin, box, ny, nz, delta):
     return g, keys, share
 
 
+#: Vertices or faces a block of the parallel passes below (their counts are prefix-summed by block).
+_BLOCK = 1 << 16
+
+
 @numba.njit(cache=True)
-def _stitch(g, faces, keys, order, voxel, lo):
-    """Merge the vertices ``order`` (shareable, sorted by key, stably) of equal key into
-    the first one in tile order, renumber the kept vertices in order (world
-    coordinates ``g voxel + lo``, float32 -> float64 first as scikit-image's
-    ``vertices * spacing``), and drop the faces that then repeat a vertex."""
-    n = len(g)
-    rep = np.arange(n)
-    for s in range(1, len(order)):
-        if keys[order[s]] == keys[order[s - 1]]:
-            rep[order[s]] = rep[order[s - 1]]
+def _merge_targets(order, sorted_keys, target):
+    """``target[q]``: the vertex that ``q`` merges into, the first of its key in
+    ``order`` (shareable vertices sorted by key, stably: the first in tile order);
+    -1 (unchanged) for a vertex that is kept."""
+    lead = -1
+    for s in range(len(order)):
+        if s > 0 and sorted_keys[s] == sorted_keys[s - 1]:
+            target[order[s]] = lead
+        else:
+            lead = order[s]
+
+
+@numba.njit(cache=True, parallel=True)
+def _renumber(target):
+    """New index of every vertex: kept ones (``target < 0``) numbered in order, merged
+    ones given their target's number. Returns ``(new, kept)``."""
+    n = len(target)
+    nb = (n + _BLOCK - 1) // _BLOCK
+    counts = np.zeros(nb + 1, dtype=np.int64)
+    for b in numba.prange(nb):
+        c = 0
+        for q in range(b * _BLOCK, min(n, (b + 1) * _BLOCK)):
+            c += target[q] < 0
+        counts[b + 1] = c
+    counts = np.cumsum(counts)
     new = np.empty(n, dtype=np.int64)
-    kept = 0
-    for q in range(n):
-        if rep[q] == q:
-            new[q] = kept
-            kept += 1
-    out_g = np.empty((kept, 3), dtype=np.float32)
-    for q in range(n):
-        if rep[q] == q:
+    for b in numba.prange(nb):
+        c = counts[b]
+        for q in range(b * _BLOCK, min(n, (b + 1) * _BLOCK)):
+            if target[q] < 0:
+                new[q] = c
+                c += 1
+    # A target comes before its vertex in order and is kept: numbered above.
+    for q in numba.prange(n):
+        if target[q] >= 0:
+            new[q] = new[target[q]]
+    return new, counts[nb]
+
+
+@numba.njit(cache=True, parallel=True)
+def _place_vertices(out, g, first, target, new, voxel, lo):
+    """World positions (``g voxel + lo``, float32 -> float64 first as scikit-image's
+    ``vertices * spacing``) of a part's kept vertices (global numbers from ``first``)."""
+    for q in numba.prange(len(g)):
+        if target[first + q] < 0:
             for a in range(3):
-                out_g[new[q], a] = np.float32(np.float64(g[q, a]) * voxel + lo[a])
-    out_f = np.empty(faces.shape, dtype=np.uint32)
-    m = 0
-    for r in range(len(faces)):
-        a, b, c = new[rep[faces[r, 0]]], new[rep[faces[r, 1]]], new[rep[faces[r, 2]]]
-        if a != b and b != c and a != c:
-            out_f[m, 0], out_f[m, 1], out_f[m, 2] = a, b, c
-            m += 1
-    return out_g, out_f[:m]
+                out[new[first + q], a] = np.float32(np.float64(g[q, a]) * voxel + lo[a])
+
+
+@numba.njit(cache=True, parallel=True)
+def _count_faces(faces, first, new):
+    """Faces of each block of a part (vertex numbers local, from ``first``) that keep
+    three distinct vertices once renumbered."""
+    nb = (len(faces) + _BLOCK - 1) // _BLOCK
+    counts = np.zeros(nb, dtype=np.int64)
+    for b in numba.prange(nb):
+        c = 0
+        for r in range(b * _BLOCK, min(len(faces), (b + 1) * _BLOCK)):
+            x, y, z = new[first + faces[r, 0]], new[first + faces[r, 1]], new[first + faces[r, 2]]
+            c += x != y and y != z and x != z
+        counts[b] = c
+    return counts
+
+
+@numba.njit(cache=True, parallel=True)
+def _write_faces(out, at, faces, first, new):
+    """The faces :func:`_count_faces` counted, renumbered, block ``b`` from ``at[b]``."""
+    nb = (len(faces) + _BLOCK - 1) // _BLOCK
+    for b in numba.prange(nb):
+        m = at[b]
+        for r in range(b * _BLOCK, min(len(faces), (b + 1) * _BLOCK)):
+            x, y, z = new[first + faces[r, 0]], new[first + faces[r, 1]], new[first + faces[r, 2]]
+            if x != y and y != z and x != z:
+                out[m, 0], out[m, 1], out[m, 2] = x, y, z
+                m += 1
+
+
+def _stitch(parts, voxel, lo):
+    """Merge the shareable vertices of equal key into the first one in tile order,
+    renumber the kept vertices in order, and drop the faces that then repeat a vertex.
+
+    Parameters
+    ----------
+    parts : list of (g, keys, share, faces)
+        Vertices (float32 grid units), their edge keys and shareability, and faces
+        numbered within the part; the parts in tile order.
+    voxel : float
+    lo : (3,) float64
+        The grid's origin.
+
+    Returns
+    -------
+    (vertices, faces)
+        float32 ``(V, 3)`` world positions, uint32 ``(F, 3)``.
+
+    The parts are never concatenated: the passes over vertices and faces run in
+    numba's threads part by part, each vertex and face written once at its final
+    place (blocks counted, then prefix-summed), as a serial pass over the
+    concatenated arrays would write them, bit for bit.
+    """
+    firsts = np.cumsum([0] + [len(g) for g, _, _, _ in parts])
+    cand = np.concatenate([np.flatnonzero(sh) + f for (_, _, sh, _), f in zip(parts, firsts)])
+    cand_keys = np.concatenate([k[sh] for _, k, sh, _ in parts])
+    by_key = np.argsort(cand_keys, kind="stable")  # stable: the first in tile order leads
+    target = np.full(firsts[-1], -1, dtype=np.int64)
+    _merge_targets(cand[by_key], cand_keys[by_key], target)
+    new, kept = _renumber(target)
+    vertices = np.empty((kept, 3), dtype=np.float32)
+    counts = []
+    for (g, _, _, f), first in zip(parts, firsts):
+        _place_vertices(vertices, g, first, target, new, voxel, lo)
+        counts.append(_count_faces(f, first, new))
+    at = np.cumsum(np.concatenate([[0]] + counts))
+    faces = np.empty((at[-1], 3), dtype=np.uint32)
+    b = 0
+    for (_, _, _, f), first, c in zip(parts, firsts, counts):
+        _write_faces(faces, at[b:b + len(c)], f, first, new)
+        b += len(c)
+    return vertices, faces
 
 
 def mesh_runs(node, flat, runs, shape, lo, voxel, normals=True) -> TriangleMesh:
@@ -187,17 +281,14 @@ def mesh_runs(node, flat, runs, shape, lo, voxel, normals=True) -> TriangleMesh:
     ny, nz = int(shape[1]), int(shape[2])
     # The plain cases compiled (arches_render.mesh.lewiner), keyed positions at level 0.
     # (in threads over chunks of runs: the single call's arrays once concatenated)
-    verts, faces, keyl, shares, nv, declined = [], [], [], [], 0, []
+    parts, declined = [], []
     for first, (g, keys, share, f, _, dec) in plain_runs_chunked(flat, runs, ny, nz, DELTA, 0.0, 1, False,
                                                                  *lewiner_luts()):
-        verts.append(g)
-        keyl.append(keys)
-        shares.append(share)
-        faces.append(f + np.int32(nv) if nv else f)
-        nv += len(g)
+        parts.append((g, keys, share, f))
         declined.extend((dec + first).tolist())
     # The runs with face or interior tests, through scikit-image (after the plain
-    # ones: the same order for the banded and the dense mesh).
+    # ones: the same order for the banded and the dense mesh), as one more part.
+    verts, faces, keyl, shares, nv = [], [], [], [], 0
     for r in declined:
         base, si, sj, sx, sy, sz, oi, oj, ok, *box = runs[r].tolist()
         vt = np.lib.stride_tricks.as_strided(flat[base:], (sx, sy, sz), (4 * si, 4 * sj, 4), writeable=False)
@@ -213,12 +304,11 @@ def mesh_runs(node, flat, runs, shape, lo, voxel, normals=True) -> TriangleMesh:
         shares.append(sh)
         faces.append(f.astype(np.int32) + np.int32(nv))
         nv += len(g)
-    if nv == 0:
+    if verts:
+        parts.append((np.concatenate(verts), np.concatenate(keyl), np.concatenate(shares), np.concatenate(faces)))
+    if sum(len(g) for g, _, _, _ in parts) == 0:
         raise ValueError("the field has no surface inside its bounds at this voxel size")
-    g, f, keys = np.concatenate(verts), np.concatenate(faces), np.concatenate(keyl)
-    cand = np.flatnonzero(np.concatenate(shares))
-    # (stable sort: the first in order leads)
-    v, f = _stitch(g, f, keys, cand[np.argsort(keys[cand], kind="stable")], float(voxel), np.asarray(lo, np.float64))
+    v, f = _stitch(parts, float(voxel), np.asarray(lo, np.float64))
     if not normals:
         return TriangleMesh(v, f, np.zeros((0, 3), dtype=np.float32))
     return oriented_mesh(node, v, f, voxel)
