@@ -394,7 +394,7 @@ def test_a_script_without_a_main_guard_gets_its_tiles_and_a_warning_not_a_hang(t
         "from arches_render.generators.rocks.tile_params import ErosionParams, TileParams\n"
         "p = TileParams(n=4, voxels_per_cell=6, seed=3, seeds=SeedParams(g_max=4.0, alpha=(0.6, 1.6)),\n"
         "               erosion=ErosionParams(steps=6))\n"
-        "a = build_aperiodic_tiles(p, workers=2)\n"
+        "a = build_aperiodic_tiles(p, workers=3)\n"  # processes (threads up to 2)
         "b = build_aperiodic_tiles(p, workers=1)\n"
         "keys = ('vertices', 'normals', 'faces', 'vstart', 'seed', 'radius', 'uid', 'slot', 'anchors')\n"
         "same = all(np.array_equal(getattr(a, k), getattr(b, k)) for k in keys)\n"
@@ -421,7 +421,7 @@ def test_an_unguarded_script_building_tiles_through_the_cache_does_not_wait_on_i
         "from arches_render.generators.rocks.tile_params import ErosionParams, TileParams\n"
         "p = TileParams(n=4, voxels_per_cell=6, seed=5, seeds=SeedParams(g_max=4.0, alpha=(0.6, 1.6)),\n"
         "               erosion=ErosionParams(steps=6))\n"
-        "store, where = tile_cache.load_or_build(p, folder=sys.argv[1], workers=2)\n"
+        "store, where = tile_cache.load_or_build(p, folder=sys.argv[1], workers=3)\n"  # processes
         "print('tiles', len(store), where)\n")
     out = subprocess.run([sys.executable, str(script), str(tmp_path / "cache")], capture_output=True, text=True,
                          timeout=240, cwd=tmp_path)
@@ -429,3 +429,26 @@ def test_an_unguarded_script_building_tiles_through_the_cache_does_not_wait_on_i
     assert out.stdout.strip().splitlines()[-1].endswith(" built"), out.stdout
     assert "guard it with 'if __name__ == \"__main__\":'" in out.stderr, out.stderr[-2000:]
     assert "would wait for the parent's cache lock" in out.stderr
+
+
+def test_tiles_built_in_threads_are_the_bits_built_inline():
+    """Up to ``THREAD_WORKERS`` workers are threads of this process (no process start, no
+    kernels loaded again); the regions they build are the inline build's, bit for bit, in
+    the same order, and this process's numba keeps its own thread count."""
+    import numba
+
+    from arches_render.generators.rocks.aperiodic_tiles import THREAD_WORKERS, build_aperiodic_tiles
+    from arches_render.generators.rocks.seed_points import SeedParams
+    from arches_render.generators.rocks.tile_params import ErosionParams
+    assert THREAD_WORKERS >= 2 and at._threadsafe_kernels()
+    p = TileParams(n=4, voxels_per_cell=6, seed=3, seeds=SeedParams(g_max=4.0, alpha=(0.6, 1.6)),
+                   erosion=ErosionParams(steps=6))
+    threads = numba.get_num_threads()
+    done = []
+    a = build_aperiodic_tiles(p, workers=2, progress=lambda d, n: done.append((d, n)))
+    b = build_aperiodic_tiles(p, workers=1)
+    assert numba.get_num_threads() == threads
+    assert done[-1][0] == done[-1][1] == 318 and len(done) == 8
+    assert a.meta["worker_cpu_seconds"] == 0.0 and len(a) > 100
+    for k in ("vertices", "normals", "faces", "vstart", "seed", "radius", "uid", "slot", "anchors"):
+        np.testing.assert_array_equal(getattr(a, k), getattr(b, k), err_msg=k)

@@ -14,7 +14,8 @@ A rock belongs to the region of its seed's cell and is stored once, however
 many corner cubes contain that region; a corner cube is the union of its 8
 vertex, 12 edge, 6 face and 1 centre regions (:func:`cube_rocks`).
 
-Regions are independent, so they are built in parallel worker processes (forkserver).
+Regions are independent, so they are built in parallel: in threads of this process for
+up to :data:`THREAD_WORKERS` workers, in worker processes (forkserver) for more.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import os
 import time
 import warnings
 
+import numba
 import numpy as np
 from scipy import ndimage
 
@@ -36,7 +38,15 @@ from .seed_points import cell_seeds
 from .tile_params import TileParams
 
 __all__ = ["region_seeds", "region_labels", "build_region", "build_aperiodic_tiles", "cube_rocks",
-           "cube_slots"]
+           "cube_slots", "THREAD_WORKERS"]
+
+#: Up to this many workers, threads of this process build the regions (where numba's
+#: threading layer allows it, :func:`_threadsafe_kernels`); more, worker processes. Every kernel releases the GIL, but ~30 % of a region's time is Python and
+#: numpy holding it, so threads stop scaling where processes go on; a process, though,
+#: costs a start (0.5 s for the forkserver's imports) and loads the compiled kernels
+#: again (0.3 s). On 2 cores (n = 5, 318 regions): threads 4.0 s, processes 4.7 s with
+#: the forkserver running and 5.1-5.5 s when it starts.
+THREAD_WORKERS = 2
 
 
 def region_seeds(mask: int, code: int, params: TileParams):
@@ -134,16 +144,15 @@ def _rock_record(field, origin, V, seed_pos, uid, params, slot):
 
 
 def _build_slots(args):
-    import resource
+    """Rocks of the regions ``slots`` and the CPU seconds this process spent on them."""
     slots, params = args
-    r0 = resource.getrusage(resource.RUSAGE_SELF)
+    c0 = time.process_time()
     all_regions = cc.regions()
     out = []
     for s in slots:
         mask, code = all_regions[s]
         out.extend(build_region(mask, code, params, s))
-    r1 = resource.getrusage(resource.RUSAGE_SELF)
-    return out, (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
+    return out, time.process_time() - c0
 
 
 def build_aperiodic_tiles(params: TileParams, progress=None, workers: int | None = None) -> RockStore:
@@ -156,11 +165,12 @@ def build_aperiodic_tiles(params: TileParams, progress=None, workers: int | None
     progress : callable, optional
         ``progress(done_regions, total_regions)``.
     workers : int, optional
-        Worker processes (default: the CPU count, at most 8; 1 runs inline). They
-        are started by multiprocessing's forkserver and import the main script again,
-        so a script calling this wants the usual ``if __name__ == "__main__":``
-        guard; without it the tiles are built in its own process, with a warning
-        (:func:`_in_workers`).
+        Workers (default: the CPU count, at most 8; 1 runs inline): threads up to
+        :data:`THREAD_WORKERS`, else processes. Processes are started by
+        multiprocessing's forkserver and import the main script again, so a script
+        calling this wants the usual ``if __name__ == "__main__":`` guard; without it
+        the tiles are built in its own process, with a warning (:func:`_in_workers`).
+        The tiles are the same bits whatever the workers.
 
     Returns
     -------
@@ -180,8 +190,14 @@ def build_aperiodic_tiles(params: TileParams, progress=None, workers: int | None
     workers = workers or min(os.cpu_count() or 1, 8)
     batches = [order[i::max(1, 4 * workers)] for i in range(max(1, 4 * workers))]
     rocks = []
-    done, cpu = 0, 0.0
-    if workers > 1:
+    done, cpu = 0, 0.0  # (cpu: of worker processes; threads' is this process's own)
+    if 1 < workers <= THREAD_WORKERS and _threadsafe_kernels():
+        for b, res in zip(batches, _in_threads(batches, params, workers)):
+            rocks.extend(res)
+            done += len(b)
+            if progress:
+                progress(done, len(order))
+    elif workers > 1:
         try:
             for b, (res, c) in zip(batches, _in_workers(batches, params, workers)):
                 rocks.extend(res)
@@ -195,9 +211,7 @@ def build_aperiodic_tiles(params: TileParams, progress=None, workers: int | None
             rocks, done, cpu, workers = [], 0, 0.0, 1
     if workers <= 1:
         for b in batches:
-            res, c = _build_slots((b, params))
-            rocks.extend(res)
-            cpu += c
+            rocks.extend(_build_slots((b, params))[0])
             done += len(b)
             if progress:
                 progress(done, len(order))
@@ -205,6 +219,39 @@ def build_aperiodic_tiles(params: TileParams, progress=None, workers: int | None
                 voxels_per_cell=params.voxels_per_cell, build_seconds=time.perf_counter() - t0,
                 worker_cpu_seconds=cpu, regions=len(all_regions))
     return RockStore.from_rocks(rocks, len(all_regions), meta)
+
+
+@numba.njit(parallel=True, cache=True)
+def _parallel_noop(x):
+    for i in numba.prange(len(x)):
+        x[i] = 0.0
+
+
+def _threadsafe_kernels() -> bool:
+    """Whether numba's parallel kernels may run from several threads at once: its
+    ``omp`` and ``tbb`` layers allow it, its fallback ``workqueue`` aborts the process."""
+    try:
+        layer = numba.threading_layer()
+    except ValueError:  # no parallel kernel has run yet: numba chooses on the first
+        _parallel_noop(np.zeros(1))
+        layer = numba.threading_layer()
+    return layer in ("omp", "tbb")
+
+
+def _in_threads(batches, params, workers):
+    """The rocks of each batch, in order, from ``workers`` threads of this process.
+
+    Each thread asks numba for one thread (a thread-local setting), as a worker process
+    does: the workers, not the kernels, take the cores.
+    """
+    from concurrent.futures import ThreadPoolExecutor
+
+    def build(batch):
+        numba.set_num_threads(1)
+        return _build_slots((batch, params))[0]
+
+    with ThreadPoolExecutor(workers) as pool:
+        yield from pool.map(build, batches)
 
 
 class _WorkersFailed(RuntimeError):

@@ -1,7 +1,8 @@
 """Rock pile benchmarks (rock-piles-aperiodic-2009 table 1, Arches 2009 table 2).
 
 ``rocks_tiles_n5_s``             seconds to build the whole aperiodic tile set, n = 5
-                                 (n_G = 10 n), warm numba kernels, 2 worker processes;
+                                 (n_G = 10 n), warm numba kernels, 2 workers (threads:
+                                 ``aperiodic_tiles.THREAD_WORKERS``);
                                  baseline: the goal, 5 s (paper: 7,355 stones in 23 s).
 ``rocks_tiles_n7_s``             the same for n = 7; goal 35 s (paper: 33,217 stones in 176 s).
 ``rocks_instances_5000_setup_s`` seconds from scene load to the first sample of a scene with
@@ -42,7 +43,7 @@ def _bench_tiles(n, goal, paper_stones, paper_s, repeat):
         c, t = cpu_seconds(), time.perf_counter()
         store = build_aperiodic_tiles(TileParams(n=n), workers=2)
         times.append(time.perf_counter() - t)
-        # Forkserver workers are not our children: they report their own CPU time.
+        # Worker processes (more than THREAD_WORKERS) report their own CPU time; threads' is ours.
         cpus.append(cpu_seconds() - c + store.meta["worker_cpu_seconds"])
     # cpu_s / 2 is what two idle cores would take; the wall time includes other users' load.
     return dict(value=statistics.median(times), unit="s", baseline=goal, baseline_is="goal",
