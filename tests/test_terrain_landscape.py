@@ -347,6 +347,29 @@ def test_later_close_shots_turn_away_from_the_sun_chosen_for_the_first():
     assert [id(s) for s in choose_shots(views, 3, lambda first: (0.0, 10.0))] == [id(s) for s in plain]
 
 
+def test_later_close_shots_take_height_classes_not_yet_taken_when_they_score_enough():
+    """Eye, drone, aerial (issue 34): after the first shot, a landform's best view of a
+    height class no shot has yet replaces its best view when it scores at least
+    CLASS_SCORE of it; otherwise the best view stays. Further views prefer new classes too."""
+    from arches_render.generators.terrain.shots import CLASS_SCORE, choose_shots
+
+    def view(landform, position, score, cls):
+        return dict(_view(landform, position, score), height_class=cls)
+
+    assert CLASS_SCORE == 0.5
+    a = [view(0, 0.0, 3.0, "eye"), view(0, 90.0, 2.9, "eye"), view(0, 180.0, 1.6, "aerial")]
+    b = [view(1, 0.0, 2.0, "eye"), view(1, 90.0, 1.2, "drone")]
+    shots = choose_shots([a, b], 3)
+    # Landform 1's drone view (1.2 >= 0.5 x 2.0) over its eye view; then landform 0's
+    # aerial view (1.6 >= 0.5 x 3.0) over its second eye view.
+    assert [(s["landform"], s["height_class"]) for s in shots] == [(0, "eye"), (1, "drone"), (0, "aerial")]
+    # Too weak (below half the view it would replace): the best views, as before.
+    b[1]["score"], a[2]["score"] = 0.9, 1.4
+    shots = choose_shots([a, b], 3)
+    assert [(s["landform"], s["height_class"], s["score"]) for s in shots] == [
+        (0, "eye", 3.0), (1, "eye", 2.0), (0, "eye", 2.9)]
+
+
 @pytest.mark.parametrize("dem, cell", [("real_aletsch_200m", "200"), ("real_maunga_whau_10m", "10")])
 def test_mountains_and_a_volcanic_cone_amplify_into_landscapes(tmp_path, capsys, dem, cell):
     """Issue 34's further real DEMs (scenes/data/DEMS.md): high mountains at 200 m cells and

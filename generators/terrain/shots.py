@@ -42,7 +42,13 @@ Views
 Choice
     The close shots are the best view of each landform in the order of
     ``3-D volume x cover``, then further views of the best landforms (azimuths at
-    least 60 degrees apart) until there are ``count``. The scene's one sun is chosen
+    least 60 degrees apart) until there are ``count``. After the first, a shot is
+    the best view of a height class no shot has yet (eye 1.7-6 m, drone 20-60 m,
+    aerial 150 m: :data:`HEIGHT_CLASSES`) where one scores at least half the view it
+    replaces: on the NM canyon DEM the third of three shots at eye height (a slope
+    filling half the frame) became a drone shot 20 m up along the line of undercuts
+    in the valley, the mesas behind. Aerial views frame landforms of the DEM's
+    scale; small ones (NM's 17 m) they show too small to be chosen. The scene's one sun is chosen
     for the first shot (lit from behind, turned aside); a later shot that would look
     within ``clear`` degrees of it (a white sky, the landform against the light) is
     replaced, by the same rule over the views that look away from it, and kept only
@@ -66,6 +72,12 @@ __all__ = ["landform_cells", "landform_volume", "close_shots", "choose_shots", "
 
 _RAYS = (32, 18)
 _HEIGHTS = (1.7, 6.0, 20.0, 60.0, 150.0)
+#: The close shots' height classes (issue 34): the candidate heights (:data:`_HEIGHTS`, m
+#: above the ground) of a person's eye, a drone and an aircraft.
+HEIGHT_CLASSES = {"eye": (1.7, 6.0), "drone": (20.0, 60.0), "aerial": (150.0,)}
+#: A view of a height class no shot has yet is preferred when it scores at least this
+#: share of the best view it displaces (:func:`_select`).
+CLASS_SCORE = 0.5
 _SPANS = (1.5, 3.0, 6.0, 12.0)
 _AZIMUTHS = 16
 
@@ -360,7 +372,7 @@ def close_shots(root, plain, heights, extent, feature, water_level=None, water_m
                 floor = np.where(np.isfinite(wl), np.maximum(ground, wl + 0.5), ground)
             origins = np.column_stack([ox, oy, floor + hh])
             free = evaluate(root, origins) < -0.25  # in air, not grazing matter
-            origins, dist, az, ground = origins[free], dist[free], az[free], ground[free]
+            origins, dist, az, ground, hh = origins[free], dist[free], az[free], ground[free], hh[free]
             targets = np.repeat(centre[None], len(origins), axis=0)
             horiz = np.hypot(*(targets[:, :2] - origins[:, :2]).T)
             steep = np.arctan2(origins[:, 2] - targets[:, 2], horiz) > 0.6 * vfov2
@@ -372,6 +384,7 @@ def close_shots(root, plain, heights, extent, feature, water_level=None, water_m
                     best.append(Shot(origin=origins[k], target=targets[k], fov=fov, cover=float(cover[k]),
                                      sky=float(sky[k]), volume_m3=volume, height_m=float(origins[k, 2] - ground[k]),
                                      score=float(score[k]), azimuth=float(az[k]), landform=len(views),
+                                     height_class=_height_class(hh[k]),
                                      **{f"legible_{m}": (bool(v[k]) if m == "legible" else float(v[k]))
                                         for m, v in legible.items()}))
         best.sort(key=lambda s: -s["score"])
@@ -412,6 +425,11 @@ def choose_shots(views, count, sun=None):
     return turned + [s for s in shots if not any(s is t for t in turned)][:count - len(turned)]
 
 
+def _height_class(height):
+    """The :data:`HEIGHT_CLASSES` name of a candidate height."""
+    return next(name for name, heights in HEIGHT_CLASSES.items() if float(height) in heights)
+
+
 def view_azimuth(camera):
     """The azimuth a camera looks in (degrees counter-clockwise from +x) from its
     ``origin`` and ``target``."""
@@ -422,26 +440,40 @@ def view_azimuth(camera):
 def _select(views, order, count, ok=None):
     """Up to ``count`` shots (module docstring, "Choice") from each landform's views
     (best first) in the landforms' ``order``; after the first, only views that ``ok``
-    accepts (a landform whose best accepted view frames none of it gives none)."""
+    accepts (a landform whose best accepted view frames none of it gives none), and
+    among those the best of a height class no shot has yet, where there is one."""
     shots = []
+
+    def fresh(v, best):
+        return (v.get("height_class") not in {x.get("height_class") for x in shots}
+                and v["cover"] > 0 and v["score"] >= CLASS_SCORE * best["score"])
+
     for i in order:
         if len(shots) >= count:
             break
         if not views[i]:
             continue
-        s = views[i][0] if not shots or ok is None else next((v for v in views[i] if ok(v)), None)
+        if not shots:
+            s = views[i][0]
+        else:
+            accepted = [v for v in views[i] if ok is None or ok(v)]
+            s = next((v for v in accepted if fresh(v, accepted[0])), accepted[0] if accepted else None)
         if s is not None and s["cover"] > 0:
             shots.append(s)
-    # More views of the best landforms, azimuths at least 60 degrees apart, until there are enough.
-    for i in order:
-        for s in views[i]:
-            if len(shots) >= count:
-                break
-            if any(s is x for x in shots) or s["cover"] <= 0 or (ok is not None and not ok(s)):
-                continue
-            same = [x for x in shots if x["landform"] == s["landform"]]
-            gap = min((abs((s["azimuth"] - x["azimuth"] + math.pi) % (2 * math.pi) - math.pi) for x in same),
-                      default=math.pi)
-            if gap >= math.radians(60):
-                shots.append(s)
+    # More views of the best landforms, azimuths at least 60 degrees apart, until there
+    # are enough: first of the height classes not yet taken, then of any.
+    for new_class_only in (True, False):
+        for i in order:
+            for s in views[i]:
+                if len(shots) >= count:
+                    break
+                if any(s is x for x in shots) or s["cover"] <= 0 or (ok is not None and not ok(s)):
+                    continue
+                if new_class_only and not fresh(s, views[i][0]):
+                    continue
+                same = [x for x in shots if x["landform"] == s["landform"]]
+                gap = min((abs((s["azimuth"] - x["azimuth"] + math.pi) % (2 * math.pi) - math.pi) for x in same),
+                          default=math.pi)
+                if gap >= math.radians(60):
+                    shots.append(s)
     return shots
