@@ -24,7 +24,7 @@ import drjit as dr  # noqa: E402
 import mitsuba as mi  # noqa: E402
 
 from arches_render.field.node import cell_index, clip_index  # noqa: E402
-from arches_render.mesh.polygonize import field_normals, polygonize  # noqa: E402
+from arches_render.mesh.polygonize import field_normals, polygonize, shading_normals  # noqa: E402
 from arches_render.scene import load_scene  # noqa: E402
 
 EVERY = REPO / "scenes" / "gallery" / "every_generator.toml"
@@ -106,8 +106,13 @@ def test_marching_cubes_normals_are_unit_where_the_field_is_flat(tmp_path):
     assert np.isfinite(n).all()
     # 1e-5: unit normals stored in float32 (norm error ~1e-7); a NaN or zero normal fails by far.
     np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1.0, atol=1e-5)
-    # Elsewhere the field's own normals are kept.
-    np.testing.assert_array_equal(n[~flat], raw[~flat])
+    # Elsewhere the field's own normals are kept (where they face the way their faces do).
+    geo = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    ring = sum(np.stack([np.bincount(f[:, k], weights=geo[:, c], minlength=len(v)) for c in range(3)], 1)
+               for k in range(3))
+    kept = ~flat & (np.einsum("ij,ij->i", raw, ring) > 0)
+    assert kept.sum() > 0.9 * (~flat).sum()
+    np.testing.assert_array_equal(n[kept], raw[kept])
     # A flat vertex's normal faces the way its faces do (the mesh is wound outwards, by
     # the field's normals); marching cubes leaves a few faces of zero area, which face no way.
     geo = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
@@ -115,3 +120,32 @@ def test_marching_cubes_normals_are_unit_where_the_field_is_flat(tmp_path):
     for k in range(3):
         on = proper & flat[f[:, k]]
         assert on.sum() > 50 and (np.einsum("ij,ij->i", geo[on], n[f[on, k]]) > 0).all()
+
+
+def test_shading_normals_replace_flat_and_backward_field_normals_by_their_faces():
+    """A vertex normal that is zero, NaN, or faces away from the vertex's faces (a feature
+    below the voxel: the gradient sees it, the coarse faces do not; such a normal renders
+    black, below its shading frame's horizon) becomes its faces' area-weighted normal;
+    usable normals stay bit for bit."""
+    # Two triangles of a unit square in z = 0, wound up (+z), and a third tilted one.
+    v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [2, 0, 1]], np.float64)
+    f = np.array([[0, 1, 2], [0, 2, 3], [1, 4, 2]], np.int64)
+    geo = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    tilt = np.array([0.6, 0.0, 0.8], np.float32)
+    normals = np.array([[0, 0, -1],            # backward: faces +z
+                        [0, 0, 0],             # flat
+                        [np.nan, 0, 0],        # not a number
+                        tilt,                  # usable, kept
+                        [0.0, 0.6, 0.8]], np.float32)  # usable (faces its one face's way), kept
+    out = shading_normals(normals, f, geo)
+    assert out.dtype == np.float32 and np.isfinite(out).all()
+    np.testing.assert_allclose(np.linalg.norm(out, axis=1), 1.0, atol=1e-6)
+    np.testing.assert_array_equal(out[0], [0, 0, 1])
+    for k in (1, 2):  # the normals of faces (0, 1, 2) and (1, 4, 2), area-weighted
+        ring = geo[(f == k).any(axis=1)].sum(axis=0)
+        np.testing.assert_allclose(out[k], ring / np.linalg.norm(ring), atol=1e-6)
+    np.testing.assert_array_equal(out[3:], normals[3:])
+    # All usable: returned as they are.
+    good = np.tile(np.float32([0, 0, 1]), (5, 1))
+    good[4] = geo[2] / np.linalg.norm(geo[2])
+    assert shading_normals(good, f, geo) is good
