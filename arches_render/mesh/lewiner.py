@@ -16,7 +16,7 @@ Both walk the cubes as scikit-image does (array axis 0 outermost, axis 2
 innermost), number vertices on first use and wind faces as its default
 ``gradient_direction='descent'``. Lewiner's plain cases (fixed tilings) are
 compiled for both; ``exact`` runs also resolve cases 3, 4 and 6 by scikit-image's
-face and interior tests (all but tiling 6.1.2, which needs the cube's centre
+face and interior tests (:mod:`.lewiner_ambiguous`) (all but tiling 6.1.2, which needs the cube's centre
 vertex). A run holding a cube of another case (terrain: 3, 4, 6, 7, 10, 12, 13;
 ``exact``: 7, 10, 12, 13, 6.1.2) is rolled back and *declined*: the caller hands
 it to scikit-image itself. ``exact`` runs are also declined when a face is
@@ -38,6 +38,10 @@ import numpy as np
 from skimage.measure import _marching_cubes_lewiner as _lewiner
 from skimage.measure import _marching_cubes_lewiner_luts as _luts
 
+from .lewiner_ambiguous import BIT_TO_V as _BIT_TO_V
+from .lewiner_ambiguous import EPS as _EPS
+from .lewiner_ambiguous import ambiguous_tiling as _ambiguous_tiling
+
 __all__ = ["PLAIN", "lewiner_tables", "lewiner_luts", "plain_runs", "plain_runs_chunked", "plain_volume"]
 
 #: Lewiner's cases whose tiling is a fixed table (no face or interior test).
@@ -46,8 +50,6 @@ PLAIN = (1, 2, 5, 8, 9, 11, 14)
 #: (6.1.2, number 5, is declined: it needs the cube's centre vertex).
 _AMBIGUOUS = ("TILING3_1", "TILING3_2", "TILING4_1", "TILING4_2", "TILING6_1_1", "TILING6_1_2", "TILING6_2")
 _TABLES = {}
-#: scikit-image's ``FLT_EPSILON`` (``np.spacing(1.0)``, a double's epsilon despite the name).
-_EPS = float(np.spacing(1.0))
 
 
 def lewiner_tables() -> dict:
@@ -181,10 +183,7 @@ def _column_spans(flat, base, si, sj, sx, sy, sz, level, span):
                 span[c, 1], span[c, 3] = last, sz - 1
 
 
-# (error_model numpy: no ZeroDivisionError check; a crossing edge has v0 > 0 >= v1 or the reverse.)
-@numba.njit(cache=True, error_model="numpy", nogil=True)
-def plain_runs(flat, runs, ny, nz, delta, level, step, exact, cases, til, ntri, corner, edge_lo, edge_axis, ends,
-               amb_til, amb_n, amb_test, pair):
+def plain_runs(flat, runs, ny, nz, delta, level, step, exact, *tables):
     """Lewiner's marching cubes on every run whose crossing cubes are all of cases it compiles.
 
     Parameters
@@ -219,6 +218,17 @@ def plain_runs(flat, runs, ny, nz, delta, level, step, exact, cases, til, ntri, 
         float32 ``(P, 3)`` unit normals (``exact``; else ``(0, 3)``), and the
         indices of the runs rolled back for scikit-image.
     """
+    kernel = _plain_runs_exact if exact else _plain_runs_keyed
+    return kernel(flat, runs, ny, nz, delta, level, step, *tables)
+
+
+# The kernel's body, inlined into one compiled kernel per mode with ``exact`` a constant:
+# the other mode's branches are then removed (the keyed mode, the terrain's, ran 10 %
+# faster than the one kernel taking ``exact`` at run time: its loop kept both modes' code).
+# (error_model numpy: no ZeroDivisionError check; a crossing edge has v0 > 0 >= v1 or the reverse.)
+@numba.njit(error_model="numpy", nogil=True, inline="always")
+def _plain_runs_body(flat, runs, ny, nz, delta, level, step, exact, cases, til, ntri, corner, edge_lo, edge_axis,
+                     ends, amb_til, amb_n, amb_test, pair):
     vmax, cmax = 0, 0
     for r in range(runs.shape[0]):
         vmax = max(vmax, runs[r, 3] * runs[r, 4] * runs[r, 5])
@@ -415,6 +425,20 @@ def plain_runs(flat, runs, ny, nz, delta, level, step, exact, cases, til, ntri, 
     return g[:nv], keys[:nv], share[:nv], faces[:nf], normals, declined[:nd]
 
 
+@numba.njit(cache=True, error_model="numpy", nogil=True)
+def _plain_runs_keyed(flat, runs, ny, nz, delta, level, step, cases, til, ntri, corner, edge_lo, edge_axis, ends,
+                      amb_til, amb_n, amb_test, pair):
+    return _plain_runs_body(flat, runs, ny, nz, delta, level, step, False, cases, til, ntri, corner, edge_lo,
+                            edge_axis, ends, amb_til, amb_n, amb_test, pair)
+
+
+@numba.njit(cache=True, error_model="numpy", nogil=True)
+def _plain_runs_exact(flat, runs, ny, nz, delta, level, step, cases, til, ntri, corner, edge_lo, edge_axis, ends,
+                      amb_til, amb_n, amb_test, pair):
+    return _plain_runs_body(flat, runs, ny, nz, delta, level, step, True, cases, til, ntri, corner, edge_lo,
+                            edge_axis, ends, amb_til, amb_n, amb_test, pair)
+
+
 def plain_runs_chunked(flat, runs, *args, workers=None, min_cubes=1 << 20):
     """:func:`plain_runs` on contiguous chunks of ``runs``, in threads.
 
@@ -454,120 +478,6 @@ def plain_runs_chunked(flat, runs, *args, workers=None, min_cubes=1 << 20):
     with ThreadPoolExecutor(workers) as pool:
         parts = pool.map(lambda c: plain_runs(flat, runs[c[0]:c[1]], *args), zip(bounds[:-1], bounds[1:]))
         return list(zip(bounds[:-1], parts))
-
-
-#: ``v`` number of the corner with bit index ``4 dz + 2 dy + dx`` (scikit-image's ``vv``).
-_BIT_TO_V = np.array([0, 1, 3, 2, 4, 5, 7, 6], dtype=np.int64)
-
-
-@numba.njit(cache=True, nogil=True)
-def _test_face(vc, face):
-    """scikit-image's ``test_face`` on the cube values ``vc`` (``v0 .. v7``, level
-    subtracted): whether the face's saddle joins the corners of ``face``'s sign."""
-    f = abs(face)
-    if f == 1:
-        A, B, C, D = vc[0], vc[4], vc[5], vc[1]
-    elif f == 2:
-        A, B, C, D = vc[1], vc[5], vc[6], vc[2]
-    elif f == 3:
-        A, B, C, D = vc[2], vc[6], vc[7], vc[3]
-    elif f == 4:
-        A, B, C, D = vc[3], vc[7], vc[4], vc[0]
-    elif f == 5:
-        A, B, C, D = vc[0], vc[3], vc[2], vc[1]
-    else:
-        A, B, C, D = vc[4], vc[7], vc[6], vc[5]
-    ac_bd = A * C - B * D
-    if -_EPS < ac_bd < _EPS:
-        return face >= 0
-    return np.float64(face) * A * ac_bd >= 0
-
-
-@numba.njit(cache=True, nogil=True)
-def _ambiguous_tiling(vc, case, cfg, amb_test):
-    """scikit-image's ``the_big_switch`` for cases 3, 4 and 6: the tiling's number in
-    ``_AMBIGUOUS``, or -1 for 6.1.2 (it needs the cube's centre vertex: left to
-    scikit-image; never chosen in 75,000 random case 6 cubes, so never tested here)."""
-    if case == 3:
-        return 1 if _test_face(vc, amb_test[0, cfg, 0]) else 0
-    if case == 4:
-        return 2 if _test_internal(vc, 4, -1, amb_test[1, cfg, 0]) else 3
-    if _test_face(vc, amb_test[2, cfg, 0]):
-        return 6
-    return 4 if _test_internal(vc, 6, amb_test[2, cfg, 2], amb_test[2, cfg, 1]) else -1
-
-
-@numba.njit(cache=True, nogil=True)
-def _test_internal(vc, case, edge, s):
-    """scikit-image's ``test_internal`` for cases 4 and 6 (``edge``: TEST6's reference
-    edge), on the cube values ``vc`` (``v0 .. v7``, level subtracted)."""
-    v0, v1, v2, v3, v4, v5, v6, v7 = vc[0], vc[1], vc[2], vc[3], vc[4], vc[5], vc[6], vc[7]
-    At, Bt, Ct, Dt = 0.0, 0.0, 0.0, 0.0
-    if case == 4:
-        a = (v4 - v0) * (v6 - v2) - (v7 - v3) * (v5 - v1)
-        b = v2 * (v4 - v0) + v0 * (v6 - v2) - v1 * (v7 - v3) - v3 * (v5 - v1)
-        t = -b / (2 * a + _EPS)
-        if t < 0 or t > 1:
-            return s > 0
-        At = v0 + (v4 - v0) * t
-        Bt = v3 + (v7 - v3) * t
-        Ct = v2 + (v6 - v2) * t
-        Dt = v1 + (v5 - v1) * t
-    else:
-        # (edge, its two ends, and the three edges parallel to it, as scikit-image lists them)
-        if edge == 0:
-            t = v0 / (v0 - v1 + _EPS)
-            Bt, Ct, Dt = v3 + (v2 - v3) * t, v7 + (v6 - v7) * t, v4 + (v5 - v4) * t
-        elif edge == 1:
-            t = v1 / (v1 - v2 + _EPS)
-            Bt, Ct, Dt = v0 + (v3 - v0) * t, v4 + (v7 - v4) * t, v5 + (v6 - v5) * t
-        elif edge == 2:
-            t = v2 / (v2 - v3 + _EPS)
-            Bt, Ct, Dt = v1 + (v0 - v1) * t, v5 + (v4 - v5) * t, v6 + (v7 - v6) * t
-        elif edge == 3:
-            t = v3 / (v3 - v0 + _EPS)
-            Bt, Ct, Dt = v2 + (v1 - v2) * t, v6 + (v5 - v6) * t, v7 + (v4 - v7) * t
-        elif edge == 4:
-            t = v4 / (v4 - v5 + _EPS)
-            Bt, Ct, Dt = v7 + (v6 - v7) * t, v3 + (v2 - v3) * t, v0 + (v1 - v0) * t
-        elif edge == 5:
-            t = v5 / (v5 - v6 + _EPS)
-            Bt, Ct, Dt = v4 + (v7 - v4) * t, v0 + (v3 - v0) * t, v1 + (v2 - v1) * t
-        elif edge == 6:
-            t = v6 / (v6 - v7 + _EPS)
-            Bt, Ct, Dt = v5 + (v4 - v5) * t, v1 + (v0 - v1) * t, v2 + (v3 - v2) * t
-        elif edge == 7:
-            t = v7 / (v7 - v4 + _EPS)
-            Bt, Ct, Dt = v6 + (v5 - v6) * t, v2 + (v1 - v2) * t, v3 + (v0 - v3) * t
-        elif edge == 8:
-            t = v0 / (v0 - v4 + _EPS)
-            Bt, Ct, Dt = v3 + (v7 - v3) * t, v2 + (v6 - v2) * t, v1 + (v5 - v1) * t
-        elif edge == 9:
-            t = v1 / (v1 - v5 + _EPS)
-            Bt, Ct, Dt = v0 + (v4 - v0) * t, v3 + (v7 - v3) * t, v2 + (v6 - v2) * t
-        elif edge == 10:
-            t = v2 / (v2 - v6 + _EPS)
-            Bt, Ct, Dt = v1 + (v5 - v1) * t, v0 + (v4 - v0) * t, v3 + (v7 - v3) * t
-        else:
-            t = v3 / (v3 - v7 + _EPS)
-            Bt, Ct, Dt = v2 + (v6 - v2) * t, v1 + (v5 - v1) * t, v0 + (v4 - v0) * t
-    test = 0
-    if At >= 0:
-        test += 1
-    if Bt >= 0:
-        test += 2
-    if Ct >= 0:
-        test += 4
-    if Dt >= 0:
-        test += 8
-    if test == 5:
-        # (scikit-image's port falls off its if-chain here, returning 0)
-        return s > 0 if At * Ct - Bt * Dt < _EPS else False
-    if test == 10:
-        return s > 0 if At * Ct - Bt * Dt >= _EPS else False
-    if test == 7 or test == 11 or test == 13 or test >= 14:
-        return s < 0
-    return s > 0
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
