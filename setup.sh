@@ -181,8 +181,10 @@ setup_venv
 install_project "$extra"
 # An editable install leaves the project's own modules uncompiled, and where the
 # environment sets PYTHONDONTWRITEBYTECODE every process compiled them again (0.3 s a
-# render, a CLI call, a test's subprocess). Up-to-date files are skipped.
-quietly "$VENV/bin/python" -m compileall -q -j 0 arches_render generators materials
+# render, a CLI call, a test's subprocess). Up-to-date files are skipped; a checkout that
+# cannot be written only loses the time, so a failure here is not fatal.
+"$VENV/bin/python" -m compileall -q -j 0 arches_render generators materials >/dev/null 2>&1 \
+    || say "byte-compiling the project's modules failed (read-only checkout?): they compile at each start"
 if [[ $mode == test ]]; then install_gltf_validator; fi
 
 if [[ $mode == demo ]]; then
