@@ -208,3 +208,20 @@ def test_stitch_in_parts_equals_the_serial_merge_of_the_concatenation():
     np.testing.assert_array_equal(v, (g[kept].astype(np.float64) * 1.5 + lo).astype(np.float32))
     np.testing.assert_array_equal(f, mapped[ok].astype(np.uint32))
     assert f.dtype == np.uint32 and v.dtype == np.float32
+
+
+def test_neighbour_range_is_scipys_3x3_minimum_and_maximum():
+    """The band's column ranges use a one-pass parallel 3 x 3 minimum and maximum: scipy's
+    ``minimum_filter`` / ``maximum_filter`` (``size=3, mode="nearest"``) exactly, thin
+    grids and infinities included."""
+    from scipy.ndimage import maximum_filter, minimum_filter
+
+    from arches_render.generators.terrain.banded_kernels import neighbour_range
+    rng = np.random.default_rng(3)
+    for shape in ((1, 1), (1, 6), (5, 1), (2, 3), (40, 57)):
+        h = rng.normal(size=shape) * 100
+        h[rng.random(shape) < 0.05] = np.inf
+        h[rng.random(shape) < 0.05] = -np.inf
+        lo, hi = neighbour_range(h)
+        np.testing.assert_array_equal(lo, minimum_filter(h, size=3, mode="nearest"), err_msg=str(shape))
+        np.testing.assert_array_equal(hi, maximum_filter(h, size=3, mode="nearest"), err_msg=str(shape))

@@ -71,7 +71,6 @@ from dataclasses import dataclass, field
 import drjit as dr
 import mitsuba as mi
 import numpy as np
-from scipy.ndimage import maximum_filter, minimum_filter
 
 from arches_render.backend import variant
 from arches_render.field import Node, evaluate
@@ -219,8 +218,8 @@ def _mark_terrain(grid: _Grid, node):
     # float32 rounding of h and z: a few ulps of the largest magnitude.
     eps = 1e-5 * (np.abs(h).max() + np.abs(grid.lo[2]) + v * grid.shape[2]) + 1e-3 * v
     pad = node.slope_bound * v / math.sqrt(2.0) + eps
-    hlo = minimum_filter(h, size=3, mode="nearest") - pad
-    hhi = maximum_filter(h, size=3, mode="nearest") + pad
+    hlo, hhi = K.neighbour_range(h)
+    hlo, hhi = hlo - pad, hhi + pad
     k0 = np.floor((hlo - grid.lo[2]) / v)
     k1 = np.ceil((hhi - grid.lo[2]) / v)
     grid.mark_intervals(k0, k1)
