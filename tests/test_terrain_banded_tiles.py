@@ -106,7 +106,7 @@ def test_marching_cubes_in_threads_equals_one_call():
     assert len(runs) >= 90 and 0 < len(declined) < len(runs) // 4 and len(one[3]) > 10000
     for workers in (2, 3):
         parts = lewiner.plain_runs_chunked(flat, runs, *args, workers=workers, min_cubes=0)
-        assert len(parts) == 4 * workers
+        assert len(parts) == 8 * workers
         nv = np.cumsum([0] + [len(p[0]) for _, p in parts])
         for field in (0, 1, 2, 4):
             np.testing.assert_array_equal(one[field], np.concatenate([p[field] for _, p in parts]))

@@ -473,11 +473,12 @@ def plain_runs_chunked(flat, runs, *args, workers=None, min_cubes=1 << 20):
     from concurrent.futures import ThreadPoolExecutor
     workers = int(workers or numba.get_num_threads())
     work = np.cumsum(runs[:, 3] * runs[:, 4] * runs[:, 5])
-    if workers <= 1 or len(runs) < 8 * workers or work[-1] < min_cubes:
+    if workers <= 1 or len(runs) < 16 * workers or work[-1] < min_cubes:
         return [(0, plain_runs(flat, runs, *args))]
-    # Four chunks a thread: a chunk of slow runs (ambiguous cubes, tall cliffs) then
-    # delays the end by a quarter of a thread's share, not by all of it.
-    chunks = 4 * workers
+    # Eight chunks a thread: a chunk of slow runs (ambiguous cubes, tall cliffs) then
+    # delays the end by an eighth of a thread's share, not by all of it (four a thread:
+    # 0.87 s against 0.81 s on the 3 km coast, 2 threads).
+    chunks = 8 * workers
     cuts = np.searchsorted(work, work[-1] * np.arange(1, chunks) / chunks)
     bounds = [0, *sorted(set(int(c) for c in cuts if 0 < c < len(runs))), len(runs)]
     with ThreadPoolExecutor(workers) as pool:
