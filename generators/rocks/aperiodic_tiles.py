@@ -221,20 +221,18 @@ def build_aperiodic_tiles(params: TileParams, progress=None, workers: int | None
     return RockStore.from_rocks(rocks, len(all_regions), meta)
 
 
-@numba.njit(parallel=True, cache=True)
-def _parallel_noop(x):
-    for i in numba.prange(len(x)):
-        x[i] = 0.0
-
-
 def _threadsafe_kernels() -> bool:
     """Whether numba's parallel kernels may run from several threads at once: its
     ``omp`` and ``tbb`` layers allow it, its fallback ``workqueue`` aborts the process."""
     try:
         layer = numba.threading_layer()
-    except ValueError:  # no parallel kernel has run yet: numba chooses on the first
-        _parallel_noop(np.zeros(1))
-        layer = numba.threading_layer()
+    except ValueError:  # no parallel kernel has run yet: let numba choose its layer now
+        try:  # (what the first parallel kernel would do; 18 ms, where compiling one took 10 s)
+            from numba.np.ufunc.parallel import _launch_threads
+            _launch_threads()
+            layer = numba.threading_layer()
+        except (ImportError, ValueError):  # numba's internals moved: processes are safe
+            return False
     return layer in ("omp", "tbb")
 
 
