@@ -139,10 +139,13 @@ def test_shading_normals_replace_flat_and_backward_field_normals_by_their_faces(
                         [0.0, 0.6, 0.8]], np.float32)  # usable (faces its one face's way), kept
     out = shading_normals(normals, f, geo)
     assert out.dtype == np.float32 and np.isfinite(out).all()
+    # 1e-6: unit vectors normalised in double and stored in float32 (a few ulps of 6e-8
+    # each); a zero, NaN or unnormalised normal fails by far.
     np.testing.assert_allclose(np.linalg.norm(out, axis=1), 1.0, atol=1e-6)
     np.testing.assert_array_equal(out[0], [0, 0, 1])
     for k in (1, 2):  # the normals of faces (0, 1, 2) and (1, 4, 2), area-weighted
         ring = geo[(f == k).any(axis=1)].sum(axis=0)
+        # (1e-6: the float32 rounding of the stored normal, as above)
         np.testing.assert_allclose(out[k], ring / np.linalg.norm(ring), atol=1e-6)
     np.testing.assert_array_equal(out[3:], normals[3:])
     # All usable: returned as they are.

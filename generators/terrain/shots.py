@@ -48,8 +48,8 @@ Choice
     replaces: on the NM canyon DEM the third of three shots at eye height (a slope
     filling half the frame) became a drone shot 20 m up along the line of undercuts
     in the valley, the mesas behind. Aerial views frame landforms of the DEM's
-    scale; small ones (NM's 17 m) they show too small to be chosen. The scene's one sun is chosen
-    for the first shot (lit from behind, turned aside); a later shot that would look
+    scale; small ones (NM's 17 m) they show too small to be chosen. The scene's one
+    sun is chosen for the first shot (lit from behind, turned aside); a later shot that would look
     within ``clear`` degrees of it (a white sky, the landform against the light) is
     replaced, by the same rule over the views that look away from it, and kept only
     where no such view frames a landform.
