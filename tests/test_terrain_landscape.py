@@ -187,23 +187,54 @@ def test_coastal_dem_of_hundreds_of_km_renders_a_landscape(tmp_path, capsys):
     _check_shots(desc, _render_all_cameras(desc))
 
 
-def test_lakes_at_spill_level_and_no_flooded_canyon_floor():
-    from arches_render.generators.terrain.water import find_water
-    # A closed crater with a rim on a gently tilted plain: one lake at the rim's lowest point.
+def test_lakes_stand_where_their_catchment_fills_them_and_no_flooded_canyon_floor():
+    from arches_render.generators.terrain.hydrology import fill_depressions
+    from arches_render.generators.terrain.water import LAKE_CATCHMENT_SHARE, descent_sinks, find_water
     x = np.linspace(-1, 1, 64)
     X, Y = np.meshgrid(x, x)
     r = np.hypot(X, Y)
+    # A closed crater with a rim on a gently tilted plain drains little more than its
+    # own bowl: its lake covers at most LAKE_CATCHMENT_SHARE of the cells draining into
+    # it, on the crater's floor, far below the rim's lowest point (it used to fill to
+    # that point: a caldera drowned to its brim).
     H = 100.0 + 10.0 * X + 40.0 * np.exp(-((r - 0.3) / 0.08) ** 2) - 30.0 * (r < 0.25)
     w = find_water(H, 0.0)
     assert w.sea_level is None and len(w.lakes) == 1, w.lakes
     level, cells = w.lakes[0]
-    inside = r < 0.25
-    assert cells >= inside.sum() and np.all(level > H[inside])
+    wet = np.isfinite(w.level)
+    assert cells == wet.sum() and np.all(w.level[wet] == level) and np.all(H[wet] < level)
+    drains_in = np.isin(descent_sinks(H), np.flatnonzero(wet)).sum()
+    assert drains_in > 1.5 * cells and cells <= LAKE_CATCHMENT_SHARE * drains_in, (cells, drains_in)
+    floor = r < 0.25
+    assert wet[floor].mean() > 0.3 and not wet[~floor].any()
     ring = (r > 0.28) & (r < 0.32)
-    assert H[ring].min() - 1.0 < level <= H[ring].min() + 1e-6  # where the rim is lowest: it spills
+    assert level < H[ring].min() - 20.0
+    # A valley dammed across its lower end drains the whole valley into the lake behind
+    # the dam, far more than the lake: it fills to the dam's lowest point and spills.
+    V = 50.0 * np.abs(X) + 30.0 * Y + 25.0 * np.exp(-((Y + 0.6) / 0.05) ** 2)
+    w = find_water(V, None)
+    assert len(w.lakes) == 1, w.lakes
+    wet = np.isfinite(w.level)
+    assert w.lakes[0][0] == fill_depressions(V)[wet].max() and np.all(Y[wet] > -0.6)
     # The flat floor of the real canyon has resampling pits of 1-4 m: no lake there.
     canyon = np.load(REPO / "scenes" / "data" / "real_nm_canyon_10m.npy", allow_pickle=False)
     assert find_water(canyon, 0.0).lakes == []
+
+
+def test_descent_sinks_follow_the_steepest_drop_to_its_pit():
+    from arches_render.generators.terrain.water import descent_sinks
+    # Two bowls side by side: every cell ends in the pit of its own bowl; a flat cell
+    # (no lower neighbour) is its own end.
+    H = np.array([[5.0, 4.0, 5.0, 6.0, 4.0, 4.0],
+                  [4.0, 1.0, 4.0, 6.0, 3.0, 2.0],
+                  [5.0, 4.0, 5.0, 6.0, 4.0, 4.0]])
+    sinks = descent_sinks(H)
+    left, right = np.ravel_multi_index((1, 1), H.shape), np.ravel_multi_index((1, 5), H.shape)
+    assert np.all(sinks[:, :3] == left) and np.all(sinks[:, 4:] == right), sinks
+    # The ridge column drains down its steeper side, into the right bowl.
+    assert np.all(sinks[:, 3] == right), sinks
+    flat = np.full((4, 4), 3.0)
+    assert np.array_equal(descent_sinks(flat), np.arange(16).reshape(4, 4))
 
 
 def test_water_quads_cover_each_wet_cell_once_at_its_level_in_maximal_runs():

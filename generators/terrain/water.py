@@ -1,19 +1,37 @@
-"""Water where the DEM has it: the sea below the sea level, lakes at their spill level (issue 14).
+"""Water where the DEM has it: the sea below the sea level, lakes at the level their catchment fills (issues 14, 34).
 
 Sea
     The cells at or below ``sea_level`` connected (8-neighbours) to the tile's
     border (:func:`.preset_choice.sea_mask`): a closed basin below sea level
     (Death Valley) is dry land, as in nature.
 Lakes
-    Depression filling (Priority-Flood, :func:`.hydrology.fill_depressions`) raises
-    every closed depression to the level where it spills; a connected set of filled
-    cells, not sea, whose depth reaches ``max(1 m, 2 % of the relief)`` and that
-    covers at least 9 cells is a lake at its spill level (its cells' filled height).
-    Shallower pits are noise of the DEM: resampling and interpolation dam valley
-    floors by a few metres (the USGS canyon of ``scenes/data`` has nine such pits,
-    1.3-4.4 m deep on a 264 m relief, one of them 0.1 km^2 of its flat floor; at
-    0.5 % of the relief they flooded the canyon). The karst preset keeps its dolines
-    dry: they drain underground.
+    Depression filling (Priority-Flood, :func:`.hydrology.fill_depressions`) finds every
+    closed depression and the level where it spills; a connected set of filled cells,
+    not sea, whose depth reaches ``max(1 m, 2 % of the relief)`` and that covers at
+    least 9 cells may hold a lake. Shallower pits are noise of the DEM: resampling and
+    interpolation dam valley floors by a few metres (the USGS canyon of ``scenes/data``
+    has nine such pits, 1.3-4.4 m deep on a 264 m relief, one of them 0.1 km^2 of its
+    flat floor; at 0.5 % of the relief they flooded the canyon). The karst preset keeps
+    its dolines dry: they drain underground.
+
+    How high a closed lake stands is a water balance: it rises until what its surface
+    evaporates (``E A_lake``) equals what its catchment brings (``P A_lake + r P
+    (A_basin - A_lake)``), so its area is a share of its catchment's,
+    ``A_lake / A_basin = r P / (E - P + r P)`` (Mason et al. 1994; Street-Perrott and
+    Harrison 1985 use the same ratio to read past climates from old shorelines); a
+    lake that reaches its spill level first overflows there. A valley dammed by a
+    landslide or a moraine drains a catchment far larger than the lake and fills to
+    its spill level; a crater or a caldera drains little more than its own bowl and
+    holds its lake well below its rim (Crater Lake, Oregon, has no outlet: its level is
+    set by precipitation against evaporation and seepage). Filling every depression to
+    its spill level drowned such bowls to the brim: a synthetic caldera 500 m deep
+    rendered as a flat disc inside a thin rim. Here
+    a lake covers at most :data:`LAKE_CATCHMENT_SHARE` of the cells that drain
+    straight into it (steepest descent on the DEM ends in it; a lake upstream that
+    spills into it is not counted, so this errs low), and its level is the highest
+    that keeps it so, up to the spill level. Cells below the level that are cut off
+    from each other are separate pools at the same level, each kept if it passes the
+    depth and size rules above.
 
 Surfaces
     Each water body is a flat mesh at its level over its cells, *grown* by
@@ -23,6 +41,15 @@ Surfaces
     the water is hidden under it. Runs of wet cells along each row are merged into
     one quad (the surface is flat, so T-junctions leave no crack), which keeps a
     large sea of a large DEM to a few thousand triangles per row band.
+
+References
+----------
+Barnes, R., Lehman, C., Mulla, D. (2014). Priority-flood. Computers & Geosciences 62,
+117-127.
+Mason, I. M., Guzkowska, M. A. J., Rapley, C. G., Street-Perrott, F. A. (1994). The
+response of lake levels and areas to climatic change. Climatic Change 27(2), 161-197.
+Street-Perrott, F. A., Harrison, S. P. (1985). Lake levels and climate reconstruction.
+In Hecht, A. D. (ed.), Paleoclimate Analysis and Modeling, Wiley, 291-340.
 """
 
 from __future__ import annotations
@@ -31,13 +58,21 @@ import numpy as np
 import trimesh
 from scipy import ndimage
 
-from .hydrology import fill_depressions
+from .hydrology import NEIGHBOUR_DI, NEIGHBOUR_DJ, fill_depressions
 from .preset_choice import sea_mask
 
-__all__ = ["WaterBodies", "find_water", "water_mesh", "LAKE_DEPTH_M", "LAKE_DEPTH_RELIEF"]
+__all__ = ["WaterBodies", "find_water", "water_mesh", "LAKE_DEPTH_M", "LAKE_DEPTH_RELIEF", "LAKE_CATCHMENT_SHARE",
+           "descent_sinks"]
 
 #: A depression is a lake when at least this deep (metres) and this fraction of the relief.
 LAKE_DEPTH_M, LAKE_DEPTH_RELIEF = 1.0, 0.02
+
+#: The largest share of its catchment a closed lake covers (module docstring, "Lakes").
+#: ``r P / (E - P + r P)`` is ~0.1 where the climate is semi-arid (P = 0.4 m, E = 1.2 m,
+#: runoff r = 0.2) and reaches 1 (the lake spills) where precipitation exceeds
+#: evaporation; one half is a temperate choice that keeps a crater's lake in the lower
+#: part of its bowl and fills every dammed valley to its spill level.
+LAKE_CATCHMENT_SHARE = 0.5
 
 
 class WaterBodies:
@@ -91,6 +126,7 @@ def find_water(heights, sea_level=0.0, lakes=True):
     found = []
     if lakes:
         relief = float(np.percentile(H, 99) - np.percentile(H, 1))
+        deep_enough = max(LAKE_DEPTH_M, LAKE_DEPTH_RELIEF * relief)
         filled = fill_depressions(H)
         depth = filled - H
         wet = (depth > 1e-6) & ~sea
@@ -100,11 +136,65 @@ def find_water(heights, sea_level=0.0, lakes=True):
             deepest = np.asarray(ndimage.maximum(depth, lab, idx))
             cells = np.bincount(lab.ravel(), minlength=n + 1)[1:]
             spill = np.asarray(ndimage.maximum(filled, lab, idx))
-            for k in np.nonzero((deepest >= max(LAKE_DEPTH_M, LAKE_DEPTH_RELIEF * relief)) & (cells >= 9))[0]:
-                m = lab == k + 1
-                level[m] = spill[k]
-                found.append((float(spill[k]), int(cells[k])))
+            # Cells draining straight into each depression: steepest descent ends in it.
+            catchment = np.bincount(lab.ravel()[descent_sinks(H).ravel()], minlength=n + 1)[1:]
+            boxes = ndimage.find_objects(lab)
+            for k in np.nonzero((deepest >= deep_enough) & (cells >= 9))[0]:
+                box = boxes[k]
+                m = lab[box] == k + 1
+                h = _balanced_level(H[box][m], spill[k], LAKE_CATCHMENT_SHARE * catchment[k])
+                pools, count = ndimage.label(m & (H[box] < h), structure=np.ones((3, 3), bool))
+                for q in range(1, count + 1):
+                    pool = pools == q
+                    if pool.sum() >= 9 and h - H[box][pool].min() >= deep_enough:
+                        level[box][pool] = h
+                        found.append((float(h), int(pool.sum())))
     return WaterBodies(level, sea, sea_level, found)
+
+
+def _balanced_level(heights, spill, allowed):
+    """The level of a lake over a depression whose cells have ``heights``: ``spill`` when
+    the full lake covers at most ``allowed`` cells, else the highest level with at most
+    ``allowed`` cells strictly below it (module docstring, "Lakes")."""
+    if heights.size <= allowed:
+        return float(spill)
+    return float(np.partition(heights, int(allowed))[int(allowed)])
+
+
+def descent_sinks(heights):
+    """Flat index of the cell where each cell's steepest descent (D8, square cells) ends.
+
+    Each cell points to its neighbour of steepest drop, itself where none is lower (a
+    pit, a flat, or the border's lowest points); following the pointers ends at a pit.
+    Pointer doubling (``sink = sink[sink]``) reaches every end in ``log2`` of the longest
+    path's length passes over the array.
+
+    Parameters
+    ----------
+    heights : numpy.ndarray
+        ``(ny, nx)`` elevations.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(ny, nx)`` int64 flat indices into ``heights``.
+    """
+    H = np.asarray(heights, np.float64)
+    ny, nx = H.shape
+    pad = np.pad(H, 1, constant_values=np.inf)
+    own = np.arange(H.size, dtype=np.int64).reshape(H.shape)
+    to, best = own.copy(), np.zeros(H.shape)
+    for di, dj in zip(NEIGHBOUR_DI, NEIGHBOUR_DJ):
+        rate = (H - pad[1 + di:1 + di + ny, 1 + dj:1 + dj + nx]) / np.hypot(di, dj)
+        steeper = rate > best
+        best = np.where(steeper, rate, best)
+        to = np.where(steeper, own + di * nx + dj, to)
+    to = to.ravel()
+    while True:
+        further = to[to]
+        if np.array_equal(further, to):
+            return to.reshape(H.shape)
+        to = further
 
 
 def _grow(level, mask, steps):
