@@ -301,22 +301,52 @@ def _escarpment(n=64):
             + 30 * np.sin(5 * X) * np.cos(4 * Y)).astype(np.float32)
 
 
-def test_escarpment_at_coarse_cells_gets_legible_close_shots(tmp_path, capsys):
-    """An escarpment plateau at 200 m cells: four cameras, and the header's legibility of
-    every close shot (sky share, depth ratio, one-sheet share) within shots.LEGIBLE."""
+def _assert_legible_close_shots(out, at_least=3):
+    """The header's legibility of every close shot (sky share, depth ratio, one-sheet
+    share) within shots.LEGIBLE, at least ``at_least`` of them, and the overview last."""
     import re
     from arches_render.generators.terrain.shots import LEGIBLE
-    np.save(tmp_path / "esc.npy", _escarpment())
-    out = tmp_path / "esc.toml"
-    rc, stdout, err = _amplify(capsys, tmp_path / "esc.npy", "-o", out, "--cell-size", "200", "--seed", "3")
-    assert rc == 0, err
     cams = next(line for line in _header(out) if line.startswith("Cameras: "))
     found = re.findall(r"legible: sky (\d+) %, depth ([\d.]+)x, one sheet (\d+) %", cams)
-    assert len(found) >= 3 and cams.rstrip().endswith("overview"), cams
+    assert len(found) >= at_least and cams.rstrip().endswith("overview"), cams
     for sky, depth, sheet in found:
         # (the header rounds: a percent and a tenth)
         assert float(sky) >= 100 * LEGIBLE["sky"] - 0.5 and float(depth) >= LEGIBLE["depth"] - 0.05, cams
         assert float(sheet) <= 100 * LEGIBLE["one_surface"] + 0.5, cams
+
+
+def test_escarpment_at_coarse_cells_gets_legible_close_shots(tmp_path, capsys):
+    """An escarpment plateau at 200 m cells: four cameras, and the header's legibility of
+    every close shot (sky share, depth ratio, one-sheet share) within shots.LEGIBLE."""
+    np.save(tmp_path / "esc.npy", _escarpment())
+    out = tmp_path / "esc.toml"
+    rc, stdout, err = _amplify(capsys, tmp_path / "esc.npy", "-o", out, "--cell-size", "200", "--seed", "3")
+    assert rc == 0, err
+    _assert_legible_close_shots(out)
+
+
+def test_caldera_gets_cliffs_in_its_walls_and_a_lake_on_its_floor(tmp_path, capsys):
+    """A caldera (issue 34's kinds of DEM): its walls are a small share of the tile, but
+    ``auto`` carves layered cliffs in them (the river default found no valley there and
+    made a few blobs), its lake lies on the floor far below the rim (it filled the
+    caldera to the brim: a flat disc), and its cameras are legible, lit and void-free."""
+    variant()
+    import trimesh
+    from arches_render.scene import load_scene
+    from synthetic_dems import caldera
+    H = caldera()
+    np.save(tmp_path / "caldera.npy", H)
+    out = tmp_path / "caldera.toml"
+    rc, stdout, err = _amplify(capsys, tmp_path / "caldera.npy", "-o", out, "--cell-size", "150", "--seed", "5")
+    assert rc == 0, err
+    assert "preset strata (strata: walls without flat tops" in stdout, stdout
+    _assert_legible_close_shots(out)
+    x = (np.arange(64) - 31.5) * 150.0
+    r = np.hypot(*np.meshgrid(x, x))
+    water = trimesh.load(next(tmp_path.glob("caldera*.water.ply")), process=False)
+    assert water.vertices[:, 2].max() < H[(r > 1300) & (r < 1500)].min() - 200.0
+    desc = load_scene(out)
+    _check_shots(desc, _render_all_cameras(desc))
 
 
 def test_one_sun_lights_the_close_shot_from_behind_and_never_looks_into_the_overview():

@@ -119,6 +119,25 @@ def test_scale_decides_between_strata_and_hoodoos():
     assert 2.0 <= s["feature_m"] <= 45.0  # hoodoo heights of the paper, section 6.3
 
 
+def test_walls_without_flat_tops_get_layered_cliffs():
+    """A caldera's walls are ~3 % of its tile and it has no flat tops: strata (has_walls),
+    where the river default found no valley; the same cone 20 times lower (walls of
+    25 m) or walls on under 1 % of the land stay with the default."""
+    from arches_render.generators.terrain.fallback import preset_candidates
+    from synthetic_dems import caldera
+    H = caldera().astype(np.float64)
+    preset, reason, st = choose_preset(H, 150.0)
+    assert preset == "strata" and "walls without flat tops" in reason, reason
+    assert 0.01 <= st["steep_fraction"] < 0.03 and st["cliff_height_m"] >= 400.0, st
+    assert [p for p, _ in preset_candidates(H, 150.0)][:2] == ["strata", "river"]
+    low = H.min() + (H - H.min()) / 20.0
+    assert choose_preset(low, 150.0)[0] == "river"
+    # The same walls on a tile four times as wide (the edges drawn out around the cone): 0.2 %.
+    wide = np.pad(H, 96, mode="edge")
+    preset, reason, st = choose_preset(wide, 150.0)
+    assert st["steep_fraction"] < 0.01 and preset != "strata", (reason, st["steep_fraction"])
+
+
 def test_dolines_on_a_plateau_are_karst():
     n, cell = 160, 20.0
     rng = np.random.default_rng(3)

@@ -20,8 +20,10 @@ Candidates
     ``--preset auto``: the preset :func:`.preset_choice.choose_preset` picks, then
     the others that the DEM's measures allow, cliff landforms first (a DEM with
     escarpments gets undercut beds before anything else): ``sea`` (a sea at the
-    border), ``strata`` and ``hoodoos`` (slopes over 30 deg on 3 % of the land),
-    ``river`` (always: water shapes most land), ``karst`` (a closed depression).
+    border), ``strata`` (slopes over 30 deg on 3 % of the land, or walls: 1 % in
+    escarpments 40 m tall, :func:`.preset_choice.has_walls`), ``hoodoos`` (slopes
+    over 30 deg on 3 % of the land), ``river`` (always: water shapes most land),
+    ``karst`` (a closed depression).
     The ranking keeps the choice first unless it made under one landform's worth;
     ties keep this order. A preset named with ``--preset`` runs alone: the user chose it, so it is
     not replaced, but the line says that ``auto`` would try the others.
@@ -47,7 +49,7 @@ from pathlib import Path
 import numpy as np
 
 from .amplify import amplify
-from .preset_choice import choose_preset
+from .preset_choice import choose_preset, has_walls
 from .preset_ranking import rank_order, ranking_line, visible_volume
 from .scene_writer import scene_document
 
@@ -90,7 +92,7 @@ def preset_candidates(heights, cell_size, sea_level=0.0):
     allowed = [
         ("sea", st["sea_fraction"] >= 0.01 and st["sea_border_fraction"] >= 0.01,
          f"sea on {pct(st['sea_fraction'])} of the tile"),
-        ("strata", steep, f"escarpments: {cliffs}"),
+        ("strata", steep or has_walls(st), f"escarpments: {cliffs}, {st['cliff_height_m']:.0f} m high"),
         ("hoodoos", steep, f"badland slopes: {cliffs}"),
         ("river", True, f"water shapes most land (valleys {st['channel_incision_m']:.0f} m deep)"),
         ("karst", st["depressions"] >= 1, f"{st['depressions']} closed depressions"),

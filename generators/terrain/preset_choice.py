@@ -48,8 +48,16 @@ Rules, in order (the first that holds wins)
              finely dissected slopes of less than 150 m of relief: the paper's
              hoodoos are a few metres to more than 40 m tall (section 6.3) and its
              hoodoo scene is 350 m across (Table 1).
-``river``    Otherwise (mountains, hills, plains): water is the agent that shapes
-             most land, and the river preset only acts where stream power is high.
+``strata``   Walls without flat tops (:func:`has_walls`): at least 1 % of the land is
+             steep and the escarpments are at least 40 m tall: a caldera's or a
+             crater's ring of cliffs, a fault scarp, a mountain's rock faces. Such
+             walls are a small share of a tile (the 500 m inner walls of a caldera
+             2.8 km across are ~3 % of a 10 km tile at 100 m cells) but they are its
+             landform, and they expose layered rock (stacked lava flows and tuffs,
+             bedded limestone) that the erosion node undercuts; the river default
+             found no valley to work on there (issue 34).
+``river``    Otherwise (hills, plains): water is the agent that shapes most land,
+             and the river preset only acts where stream power is high.
 
 References
 ----------
@@ -68,13 +76,21 @@ import numpy as np
 
 from .hydrology import fill_depressions, flow_accumulation
 
-__all__ = ["ANALYSIS_CELLS", "analysis_grid", "sea_mask", "terrain_stats", "choose_preset", "landform_scales"]
+__all__ = ["ANALYSIS_CELLS", "analysis_grid", "sea_mask", "terrain_stats", "choose_preset", "has_walls",
+           "landform_scales"]
 
 #: Samples along the longer side of the analysis grid.
 ANALYSIS_CELLS = 256
 
 _FLAT_DEG = 6.0  # below: a flat top, bench or valley floor
 _STEEP_DEG = 30.0  # above: an escarpment or cliff at the analysis baseline (talus is ~30-35 deg)
+_WALL_SHARE, _WALL_HEIGHT_M = 0.01, 40.0  # walls: steep land share and escarpment height (rules, "strata")
+
+
+def has_walls(stats) -> bool:
+    """Whether :func:`terrain_stats` measured walls that layered cliffs can be carved in:
+    at least 1 % of the land steep, in escarpments at least 40 m tall (module docstring)."""
+    return stats["steep_fraction"] >= _WALL_SHARE and stats["cliff_height_m"] >= _WALL_HEIGHT_M
 
 
 def analysis_grid(heights, cell_size, cells=ANALYSIS_CELLS):
@@ -287,6 +303,9 @@ def choose_preset(heights, cell_size, sea_level=0.0):
         return "strata", f"strata: {why} on a {st['extent_m'] / 1000:.1f} km tile", st
     if tabular or (st["steep_fraction"] >= 0.2 and R < 150.0 and st["extent_m"] < 2000.0):
         return "hoodoos", f"hoodoos: badland scale, {why}, relief {R:.0f} m", st
+    if has_walls(st):
+        return "strata", (f"strata: walls without flat tops, slopes over {_STEEP_DEG:g} deg on "
+                          f"{pct(st['steep_fraction'])} of the land in escarpments {cliff:.0f} m high"), st
     return "river", (f"river (default): no sea, plateau or karst; relief {R:.0f} m, valleys "
                      f"{st['channel_incision_m']:.0f} m deep"), st
 
