@@ -41,7 +41,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..field.heightfield_mipmap import heightfield_cast_plan
-from .march import SECOND_PASS_FACTOR, March, TraceResult, ray_box
+from .march import SECOND_PASS_FACTOR, March, ShadowProbe, TraceResult, ray_box
 from .mipmap_traversal import MipmapTraversal
 from .sphere_tracer import SphereTracer
 
@@ -250,7 +250,7 @@ class HeightfieldCaster:
             alive &= ~(probing & long & ~go & (seg_end >= t_end))
             # NEAR: sphere steps from t_seg until a step is long again.
             nearing = alive & (mode == NEAR)
-            near = self._near(o, d, t_seg, t_end, near_end, nearing, steps, budget, cone)
+            near = self._near(o, d, t_seg, t_end, near_end, nearing, steps, budget, cone, any_hit)
             found |= near.hit
             t_hit = dr.select(near.hit, near.t, t_hit)
             steps = dr.select(nearing, near.steps, steps)
@@ -301,17 +301,18 @@ class HeightfieldCaster:
         return cert >= min_cast, seg_end, dr.maximum(t_seg, ta), dr.minimum(seg_end, tb), near_end
 
     @dr.syntax
-    def _near(self, o, d, t_start, t_end, near_end, active, steps, budget, cone):
+    def _near(self, o, d, t_start, t_end, near_end, active, steps, budget, cone, any_hit=False):
         """Over-relaxed sphere steps on the full field from ``t_start`` (:mod:`.march`;
-        ``steps`` counts every sphere step of the ray, against its budgets). Past
-        ``near_end``, a long free step hands the lane back to probing at its
-        verified end (``leave``).
+        ``steps`` counts every sphere step of the ray, against its budgets; a shadow
+        ray's may probe, :mod:`.march`, "Shadow probes"). Past ``near_end``, a long free
+        step hands the lane back to probing at its verified end (``leave``).
 
         Returns
         -------
         _NearOutcome
         """
         march = March.start(t_start, self.omega)
+        shadow = ShadowProbe.start(dr.width(t_start)) if any_hit else None
         hit = mi.Bool(False)
         invalid = mi.Bool(False)
         done = mi.Bool(False)
@@ -320,7 +321,10 @@ class HeightfieldCaster:
         steps = mi.UInt32(steps)
         while dr.hint(alive & (steps < budget), label="hf_near"):
             t_now = march.t
-            march, out, r = self.sphere.step(o, d, march, t_end, cone)
+            if dr.hint(any_hit, mode="scalar"):
+                march, out, r, shadow = self.sphere.step(o, d, march, t_end, cone, shadow)
+            else:
+                march, out, r = self.sphere.step(o, d, march, t_end, cone)
             going = alive & ~out.failed & ~out.hit & ~out.invalid & (r >= self._min_cast) & (t_now >= near_end)
             # Leave at the end of the verified free interval, not at a relaxed point.
             march.t = dr.select(going, t_now + r, march.t)

@@ -47,6 +47,21 @@ decides what is verified (camera steps, 320x180: Jacksboro 42.0 -> 36.6, NM cany
 Steps stop at ``t_end``, so that a relaxed step past the end is still checked there
 before the ray may leave (else it could skip a surface just before a mesh).
 
+Shadow probes. A shadow ray needs *a* hit, not the first: any point of its segment
+within the hit tolerance of the solid (or inside it) proves it blocked, whether or not
+the steps that led there were verified. A ray closing on a wall that its bound
+overestimates ``K / g``-fold only shrinks its distance by about ``omega g / K`` a step
+(``g`` the directional derivative), so it took hundreds of steps to creep up to a wall it
+was bound to hit (goblins: blocked shadow rays 60.6 steps, 381 at the 99th percentile,
+against 49.6 for free ones). So a shadow ray whose value rises between its last
+verified point and the next point takes, instead of the relaxed step, the secant's zero
+``t + (-f) (t - t_prev) / (f - f_prev)`` pushed ``PROBE_BEYOND`` past it when that is
+farther: a probe. A probe that lands in the rock (or within the tolerance) is the hit;
+one that lands in air is checked by the overlap test as a relaxed step is (its value
+is kept only where the free intervals cover the jump), and a failed one costs one plain
+step; after ``PROBE_FAILURES`` failures (a ray grazing a wall, whose value rises then
+falls) the ray marches without probes.
+
 References
 ----------
 Hart, J. C. (1996). Sphere tracing. The Visual Computer 12(10).
@@ -63,8 +78,8 @@ from dataclasses import dataclass, field
 import drjit as dr
 import mitsuba as mi
 
-__all__ = ["SECOND_PASS_FACTOR", "March", "StepOutcome", "TraceResult", "adaptive_relaxation", "march_result",
-           "position_ulps", "ray_box", "relaxed_step"]
+__all__ = ["SECOND_PASS_FACTOR", "March", "ShadowProbe", "StepOutcome", "TraceResult", "adaptive_relaxation",
+           "march_result", "position_ulps", "ray_box", "relaxed_step", "secant_probe"]
 
 #: A ray that exhausts ``max_steps`` goes on for this many times more steps.
 SECOND_PASS_FACTOR = 16
@@ -200,12 +215,15 @@ class StepOutcome:
     failed : mi.Bool
         The relaxed step that led to ``march.t`` overshot: the march went back to
         its verified frontier.
+    probed : mi.Bool
+        The next point is a shadow probe (:func:`secant_probe`).
     """
 
     hit: object
     done: object
     invalid: object
     failed: object
+    probed: object = False
 
 
 #: The fraction of the predicted overlap limit ``2 r / (1 - beta)`` a relaxed step takes
@@ -227,7 +245,7 @@ def adaptive_relaxation(march, r, omega0):
     return dr.select((m.step <= 0.0) | (beta >= 0.0), omega0, predicted)
 
 
-def relaxed_step(march, f, r, t_end, tol, omega0):
+def relaxed_step(march, f, r, t_end, tol, omega0, probe=None):
     """One over-relaxed sphere step from the field's answer at ``march.t`` (module docstring).
 
     Parameters
@@ -242,6 +260,10 @@ def relaxed_step(march, f, r, t_end, tol, omega0):
         The hit tolerance at ``march.t``.
     omega0 : float or mi.Float
         The largest relaxation (:func:`adaptive_relaxation` chooses the step's).
+    probe : mi.Float, optional
+        A shadow ray's probe (:func:`secant_probe`; 0: none): the next point where it is
+        farther than the relaxed step. With it, a hit anywhere counts (module
+        docstring, "Shadow probes"); without it, only at a point the overlap test verified.
 
     Returns
     -------
@@ -253,10 +275,19 @@ def relaxed_step(march, f, r, t_end, tol, omega0):
     # (An infinite free radius is a proof: the whole line is free.)
     invalid = dr.isnan(f) | dr.isnan(r)
     failed = ~invalid & (m.omega > 1.0) & (r + m.r_prev < m.step)
-    hit = ~failed & ~invalid & ((-f < tol) | (f >= 0.0))
+    hit = ~invalid & ((-f < tol) | (f >= 0.0))
+    if probe is None:
+        hit &= ~failed
+    failed &= ~hit
     w = adaptive_relaxation(m, r, omega0)
     # Relaxed step overshot: return to the verified frontier (the plain step from t_prev).
     t_next = dr.select(failed, m.frontier, dr.minimum(m.t + w * r, t_end))
+    probed = mi.Bool(False)
+    if probe is not None:
+        probed = ~failed & (probe > t_next)
+        t_next = dr.select(probed, probe, t_next)
+        # A probe is checked as a relaxed step is (omega > 1: the overlap test applies).
+        w = dr.select(probed, dr.maximum(w, 2.0), w)
     done = ~failed & ~hit & ~invalid & (m.t >= t_end)
     stay = hit | invalid
     out = March(t=dr.select(stay, m.t, t_next),
@@ -266,4 +297,78 @@ def relaxed_step(march, f, r, t_end, tol, omega0):
                 # makes the overlap test there trivially satisfied.
                 step=dr.select(stay, m.step, dr.select(failed, m.r_prev, t_next - m.t)),
                 omega=dr.select(stay, m.omega, dr.select(failed, 1.0, w)))
-    return out, StepOutcome(hit=hit, done=done, invalid=invalid, failed=failed)
+    return out, StepOutcome(hit=hit, done=done, invalid=invalid, failed=failed, probed=probed & ~stay)
+
+
+#: How far past the secant's zero a shadow probe lands, as a multiple of the distance to
+#: it (module docstring, "Shadow probes"): past it, so that a wall the secant predicts
+#: well is entered, not approached (1.1, 1.25, 1.5 and 2 were within 1.5 steps of each
+#: other; 1.25 the fewest).
+PROBE_BEYOND = 1.25
+
+#: Failed probes after which a shadow ray marches without them. Shadow steps (mean, and
+#: 99th percentile of blocked rays) on goblins / every_generator / arch bridge at 320x180,
+#: probing 1.25 past the secant's zero: 2 failures 45.8, 184 / 22.4, 119 / 31.8, 292; 4:
+#: 44.9, 162 / 22.3, 121 / 30.7, 253; 8: free rays pay more (goblins 50.8 -> 51.6) than
+#: blocked ones gain. (Without probes: 53.5, 381 / 23.2, 118 / 35.3, 361.) Capping a
+#: probe at 16 free radii ahead kept half of the gain away: the probes that pay jump far.
+PROBE_FAILURES = 4
+
+
+@dataclass
+class ShadowProbe:
+    """A shadow ray's probe state (module docstring, "Shadow probes").
+
+    Attributes
+    ----------
+    f_prev : mi.Float
+        The field's value at the march's last verified point ``t_prev``.
+    probing : mi.Bool
+        The march's next point was reached by a probe.
+    failures : mi.UInt32
+        Probes that failed the overlap test so far.
+    """
+
+    f_prev: object = field(default_factory=lambda: mi.Float())
+    probing: object = field(default_factory=lambda: mi.Bool())
+    failures: object = field(default_factory=lambda: mi.UInt32())
+
+    @classmethod
+    def start(cls, width):
+        """No verified point yet (``march.step`` is 0 there, so no probe is taken)."""
+        cls.DRJIT_STRUCT = {"f_prev": mi.Float, "probing": mi.Bool, "failures": mi.UInt32}
+        return cls(f_prev=dr.zeros(mi.Float, width), probing=dr.zeros(mi.Bool, width),
+                   failures=dr.zeros(mi.UInt32, width))
+
+    def after(self, outcome, f):
+        """The state after a step that evaluated ``f`` at the march's point and ended in
+        ``outcome``: the point becomes the verified one unless the step failed or stopped."""
+        accepted = ~(outcome.failed | outcome.hit | outcome.invalid)
+        return ShadowProbe(f_prev=dr.select(accepted, f, self.f_prev), probing=outcome.probed,
+                           failures=self.failures + dr.select(self.probing & outcome.failed, 1, 0))
+
+
+def secant_probe(march, f, probe, t_end):
+    """Where a shadow ray probes next (module docstring, "Shadow probes"), or 0.
+
+    Parameters
+    ----------
+    march : March
+        The state at the point just evaluated.
+    f : mi.Float
+        The field's value there.
+    probe : ShadowProbe
+        The ray's probe state (``f_prev`` at ``march.t_prev``).
+    t_end : mi.Float
+        The end of the ray's interval.
+
+    Returns
+    -------
+    mi.Float
+        ``t + PROBE_BEYOND (-f) (t - t_prev) / (f - f_prev)`` (at most ``t_end``) where the value
+        rose from a verified point and fewer than ``PROBE_FAILURES`` probes failed; 0 elsewhere.
+    """
+    m = march
+    closing = (m.step > 0.0) & (f > probe.f_prev) & (f < 0.0) & (probe.failures < PROBE_FAILURES)
+    reach = PROBE_BEYOND * (-f) * (m.t - m.t_prev) * dr.rcp(dr.maximum(f - probe.f_prev, 1e-30))
+    return dr.select(closing, dr.minimum(m.t + reach, t_end), 0.0)

@@ -33,7 +33,8 @@ from ..field import gradient
 from ..field.culling import with_culling
 from ..field.lod import Footprint
 from ..field.node import finite_box, one_sided
-from .march import SECOND_PASS_FACTOR, March, march_result, position_ulps, ray_box, relaxed_step
+from .march import (SECOND_PASS_FACTOR, March, ShadowProbe, march_result, position_ulps, ray_box, relaxed_step,
+                    secant_probe)
 from .sun_columns import SUN_HALF_ANGLE, SunColumns
 
 #: Fraction of the cone's radius that a hit may stay in front of the surface. At a
@@ -125,9 +126,12 @@ class SphereTracer:
         cone : (mi.Float, mi.Float), optional
             ``(r0, s)``: each lane's cone (module docstring); None: full detail.
         any_hit : bool
-            A shadow ray: with a sun map (:meth:`aim_at_sun`) a ray towards the sun
-            stops where the map proves the rest of it free, and one it proves in rock
-            is a hit without a step (``t`` its start). Every hit of the sphere tracer is certain.
+            A shadow ray: it may probe ahead (:mod:`.march`, "Shadow probes"), and stops
+            at the first point it finds within the tolerance of the solid or inside it,
+            which need not be the first hit along it (``t`` is that point's); with a
+            sun map (:meth:`aim_at_sun`) a ray towards the sun stops where the map proves
+            the rest of it free, and one it proves in rock is a hit without a step (``t``
+            its start). Every hit of the sphere tracer is certain.
 
         Returns
         -------
@@ -138,21 +142,23 @@ class SphereTracer:
         t_end = dr.minimum(t_out, tmax)
         if not (any_hit and self.sun is not None):
             active = mi.Bool(active) & (t_start <= t_end)
-            return self._march(mi.Point3f(o), mi.Vector3f(d), t_start, t_end, active, cone)
+            return self._march(mi.Point3f(o), mi.Vector3f(d), t_start, t_end, active, cone, any_hit)
         t_cap, rock = self.sun.limits(o, d, tmax)
         rock &= mi.Bool(active) & (t_start <= t_end)
         t_end = dr.minimum(t_end, t_cap)
         active = mi.Bool(active) & ~rock & (t_start <= t_end)
-        res = self._march(mi.Point3f(o), mi.Vector3f(d), t_start, t_end, active, cone)
+        res = self._march(mi.Point3f(o), mi.Vector3f(d), t_start, t_end, active, cone, any_hit)
         res.hit |= rock
         res.t = dr.select(rock, t_start, res.t)
         return res
 
     @dr.syntax
-    def _march(self, o, d, t_start, t_end, active, cone):
+    def _march(self, o, d, t_start, t_end, active, cone, any_hit=False):
         """The loop of :meth:`query` over ``[t_start, t_end]``; see :mod:`.march`."""
         budget = self.max_steps * (1 + SECOND_PASS_FACTOR)
         march = March.start(t_start, self.omega)
+        # A shadow ray's probe state (march, "Shadow probes"); None for other rays.
+        shadow = ShadowProbe.start(dr.width(t_start)) if any_hit else None
         hit = mi.Bool(False)
         invalid = mi.Bool(False)
         alive = mi.Bool(active)
@@ -160,17 +166,22 @@ class SphereTracer:
         # The budget ends the loop (its condition), not ``alive``: a lane still alive
         # when it runs out is what march_result reports as unresolved.
         while dr.hint(alive & (steps < budget), label="sphere_trace"):
-            march, out, _ = self.step(o, d, march, t_end, cone)
+            if dr.hint(any_hit, mode="scalar"):
+                march, out, _, shadow = self.step(o, d, march, t_end, cone, shadow)
+            else:
+                march, out, _ = self.step(o, d, march, t_end, cone)
             hit |= out.hit
             invalid |= out.invalid
             alive &= ~(out.hit | out.done | out.invalid)
             steps += 1
         return march_result(march, hit, alive, invalid, steps, active, self.max_steps)
 
-    def step(self, o, d, march, t_end, cone=None):
+    def step(self, o, d, march, t_end, cone=None, shadow=None):
         """One over-relaxed sphere step of the rays ``o + t d`` from ``march.t``
         (:func:`~.march.relaxed_step`): ``(march, outcome, r)``, ``r`` the free radius
-        the field granted there."""
+        the field granted there; with ``shadow`` (a :class:`~.march.ShadowProbe`), a
+        shadow ray's step, which may probe (:mod:`.march`, "Shadow probes"), and its
+        probe state after the step as a fourth item."""
         t = march.t
         # A point reached without a relaxed step (the ray's start, the frontier after a
         # failed step, a plain step) needs no free length behind it, only ahead: the
@@ -178,8 +189,11 @@ class SphereTracer:
         # led there (field.node, "Ahead"). A ray leaving a surface then steps away at once.
         with one_sided((march.step <= 0.0) | (march.omega <= 1.0)):
             f, (r,) = self.field.eval_bounds(o + d * t, (0.0,), d, self.footprint(cone, t))
-        march, out = relaxed_step(march, f, r, t_end, self.tolerance(t, cone), self.omega)
-        return march, out, r
+        probe = None if shadow is None else secant_probe(march, f, shadow, t_end)
+        new, out = relaxed_step(march, f, r, t_end, self.tolerance(t, cone), self.omega, probe)
+        if shadow is None:
+            return new, out, r
+        return new, out, r, shadow.after(out, f)
 
     def trace(self, o, d, tmax, active, cone=None):
         """``(hit, t)`` of :meth:`query` (unresolved rays count as hits)."""
