@@ -17,11 +17,21 @@ field dips below zero. Then:
   ``L = L_f + L_D + M_D L_rho`` with ``M_D`` the erosion field's ``value_max``. The
   same holds in a ball with the erosion field's local bounds
   (:meth:`~.skeletal_set.SkeletalSet.local_lipschitz`), which ``eval_bounds`` uses.
-* Slopes in small balls: in the ball ``B(p, rad)`` the slope is at most
-  ``S_f(rad) + S_D(rad) + M_D(B) L_rho`` with ``S_f``, ``S_D`` the child's and the erosion
-  field's slope bounds in that ball (:func:`~arches_render.field.local_slopes.eval_local`)
-  and ``M_D(B)`` the erosion field's maximum there (its cell table within one cell
-  edge), so ``min(rad, (-f~ - c) / S)`` is a distance bound too. ``eval_bounds`` asks
+* Slopes in small balls: in the ball ``B(p, rad)``, with ``S_f``, ``S_D`` the child's and
+  the erosion field's slope bounds there (:func:`~arches_render.field.local_slopes.eval_local`),
+  ``M_D(B)`` the erosion field's maximum there (its cell table within one cell edge) and
+  ``r^ = clamp(rho, 0, 1)``, which is ``L_rho``-Lipschitz,
+
+      |grad f~| <= |grad f| + |grad D| (1 - r^) + D |grad r^|
+                <= S_f + S_D min(1, 1 - r^(p) + L_rho rad) + min(M_D(B), D(p) + S_D rad) L_rho,
+
+  since ``1 - r^`` and ``D`` move by at most ``L_rho rad`` and ``S_D rad`` from ``p`` within
+  the ball. So ``min(rad, (-f~ - c) / S)`` is a distance bound too. Hard beds
+  (``r^ ~ 1``) thus take the child's slope, not the erosion field's steepest, and a
+  point where the erosion is weak does not pay its maximum: on the erosion scenes
+  ``S_D`` (about ``2 T G_SLOPE / R``) and ``M_D L_rho`` were each several times the
+  child's slope next to the cliffs they carve. (``r^(p)`` is evaluated where ``D(p) > 0``
+  only; elsewhere ``1 - r^`` is bounded by 1.) ``eval_bounds`` asks
   for two radii, the erosion field's ``local_radius`` and an eighth of it, as the
   sum does: a ray leaving a wall that the erosion cut into a terrain's steep side
   takes the step of the terrain's slope there, not of the steepest DEM cell anywhere
@@ -70,21 +80,24 @@ class Erosion(Node):
         self.children = (child, erosion_field, resistance)
 
     def _erode(self, p, f, fd=None):
+        """``(f~, 1 - clamp(rho, 0, 1))`` at ``p``, the second 1 where the erosion field
+        is not positive (rho is not evaluated there)."""
         # The geology tree is evaluated only where the erosion field is positive
         # (a symbolic branch: packets with no such lane skip it).
         if fd is None:
             fd = self.children[1].eval(p)
 
         def eroded(p, f, fd):
-            return f - fd * (1.0 - dr.clip(self.children[2].eval(p), 0.0, 1.0))
+            soft = 1.0 - dr.clip(self.children[2].eval(p), 0.0, 1.0)
+            return f - fd * soft, soft
 
         def intact(p, f, fd):
-            return f
+            return f, dr.ones(type(f), dr.width(f))
 
         return dr.if_stmt((p, f, fd), fd > 0.0, eroded, intact, label="erosion")
 
     def eval(self, p):
-        return self._erode(p, self.children[0].eval(p))
+        return self._erode(p, self.children[0].eval(p))[0]
 
     def box_range(self, lo, hi):
         # Erosion removes at most max(f_D, 0) (1 - rho) <= max(f_D, 0), never adds.
@@ -115,9 +128,9 @@ class Erosion(Node):
             # The erosion field at full detail, as eval has it (the same value up to the
             # order of a sum over its primitives), with its slopes.
             fd, _, field_slopes = eval_local(field, p, (), None, None, radii)
-            v = self._erode(p, f, fd)
+            v, soft = self._erode(p, f, fd)
         else:
-            v = self._erode(p, f)
+            v, _ = self._erode(p, f)
         # The erosion field's cell tables, read once: the local bound and the balls' M_D.
         own = getattr(field, "local_lipschitz", None)
         field_local = None if own is None else own(p)
@@ -132,9 +145,11 @@ class Erosion(Node):
             # Slopes in the balls of radii (module docstring); the child's already grown.
             _, M_cell, cell = field_local
             M_glob = max(float(field.value_max), 0.0)
+            D, L_rho = dr.maximum(fd, 0.0), rho.lipschitz
             for S_f, S_D, rad in zip(child_slopes, field_slopes, radii):
-                M = dr.select(rad <= cell, dr.maximum(M_cell, 0.0), M_glob)
-                inv = dr.rcp(dr.maximum(S_f + S_D + M * rho.lipschitz, 1e-12))
+                M = dr.minimum(dr.select(rad <= cell, dr.maximum(M_cell, 0.0), M_glob), D + S_D * rad)
+                S = S_f + S_D * dr.minimum(soft + L_rho * rad, 1.0) + M * L_rho
+                inv = dr.rcp(dr.maximum(S, 1e-12))
                 hart = tuple(dr.maximum(h, dr.minimum(dr.maximum(-v - c, 0.0) * inv, rad))
                              for h, c in zip(hart, levels))
         return v, tuple(dr.maximum(d, h) for d, h in zip(ds, hart))
