@@ -399,40 +399,6 @@ def test_erosion_steps_with_slopes_in_small_balls_next_to_its_walls():
     assert np.median(d.numpy() / hart) > 2.5
 
 
-def _flat_eroded(resistance):
-    """A flat implicit terrain notched by a row of erosion spheres at its surface, under
-    ``resistance``: the erosion's own terms (``S_D``, ``D L_rho``) set the true slope
-    there, not the terrain's (about T / R)."""
-    flat = ImplicitHeightfield(np.zeros((17, 17)), (0, 0, 60, 60), R=8.0)
-    centres = np.column_stack([np.linspace(15, 45, 7), np.full(7, 30.0), np.zeros(7)])
-    spheres = SkeletalSet(centres, None, 3.0, 2.0 * flat.T_np, combine="max")
-    return Erosion(flat, spheres, resistance), flat, centres
-
-
-@pytest.mark.parametrize("geology", ["thin_strata", "soft", "hard"])
-def test_erosion_slopes_in_balls_hold_where_the_erosion_sets_them(geology):
-    """The erosion's slope in a ball (erosion_node's docstring) keeps its distance bounds
-    free where the erosion field and the strata make the surface steep (thin beds: the
-    ``D L_rho`` term; soft rock: the ``S_D`` term; dropping either lets matter into the
-    balls: checked), and in hard rock, where it is the terrain's slope alone. (That it
-    is tighter than before is shown by step counts, not here: the child's own distance
-    bounds, which the node keeps, hide the difference in these balls.)"""
-    resistance = {"thin_strata": G.Strata(1.0, 0.25, 1.0), "soft": G.Constant(0.0),
-                  "hard": G.Constant(1.0)}[geology]
-    node, flat, centres = _flat_eroded(resistance)
-    rng = np.random.default_rng(41)
-    p = rng.uniform([10, 24, -5], [50, 36, 3], (400000, 3))
-    v = evaluate(node, p)
-    p = p[(v > -1.5) & (v < -1e-3)][:3000]
-    assert len(p) > 1000
-    for direction in (None, np.array([0.3, -0.2, 0.93])):
-        if direction is not None:
-            direction = direction / np.linalg.norm(direction)
-        for level in (0.0, 0.3):
-            worst, _ = _free_violation(node, p, level, direction, rng)
-            assert worst < 1e-4, f"level {level}: f + c = {worst:.3g} inside a free region"
-
-
 def _free_violation(node, p, level, direction, rng, k=12, ahead=False):
     """Largest ``f + level`` found in the balls (or two-sided line segments; with
     ``ahead``, the one-sided segments of ``one_sided``) that ``eval_bounds`` declares
