@@ -98,6 +98,34 @@ def test_free_lengths_within_a_cell_ignore_the_wall_next_door():
     assert np.all(gain >= 1.0 - 1e-6) and np.median(gain) > 2.0, np.median(gain)
 
 
+@pytest.mark.parametrize("ahead", [False, True], ids=["two-sided", "ahead"])
+def test_free_lengths_over_a_gentle_fbm_are_free(ahead):
+    """A millimetre fBm on a cliff DEM (as the sea cliffs') is *gentle*: lines take its
+    derivative at its slope bound instead of evaluating it (elevation_line,
+    ``GENTLE_FBM_SLOPE``). Rays from just above the floor, the wall and the mesa, in
+    every direction: free on their two-sided segments, and ahead with ``one_sided``."""
+    from arches_render.field.node import one_sided
+    x = np.linspace(0.0, 40.0, 21)
+    X, _ = np.meshgrid(x, x)
+    H = 20.0 / (1.0 + np.exp(-(X - 23.0)))  # a wall ~20 m high around x = 23
+    cliff = ImplicitHeightfield(H, (0, 0, 40, 40), R=4.0, amplification=dict(
+        amplitude=0.004, wavelength=2.0, octaves=4, seed=3, border=2.0, taper=3.0))
+    assert cliff._line.gentle
+    n = 2000
+    rng = np.random.default_rng(6)
+    xy = rng.uniform(4.0, 36.0, (n, 2))
+    p = np.column_stack([xy, cliff.elevation_np(xy[:, 0], xy[:, 1]) + 10 ** rng.uniform(-3, 0.5, n)])
+    d = rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    with one_sided(mi.Bool(ahead)):
+        _, (dist,) = cliff.eval_bounds(_vec(p), (0.0,), _vec(d, mi.Vector3f))
+    dist = dist.numpy().astype(np.float64)
+    assert (dist > 1e-3).mean() > 0.5
+    s = (np.linspace(0.0, 1.0, 130)[1:] if ahead else np.linspace(-1.0, 1.0, 129)) * 0.999
+    q = (p[None] + (s[:, None, None] * dist[None, :, None]) * d[None]).reshape(-1, 3)
+    assert evaluate(cliff, q).max() < INSIDE
+
+
 def test_fbm_gradient_is_fbm_and_its_derivative():
     rng = np.random.default_rng(3)
     p = rng.uniform(-20, 20, (4000, 3))

@@ -296,7 +296,8 @@ class ImplicitHeightfield(Heightfield):
         slopes grown by ``1 + kappa s``)."""
         level = self._lod.level(footprint) if self.amp is not None else None
         grow = 1.0 + self.lod_kappa * footprint.rate if level is not None else 1.0
-        if direction is None:
+        a0 = None
+        if direction is None or self._line.gentle:
             v = self.elevation(p.x, p.y, level) - p.z
         else:
             h, a0 = self.elevation(p.x, p.y, level, along=direction)
