@@ -96,6 +96,11 @@ def test_free_lengths_within_a_cell_ignore_the_wall_next_door():
     gain = dist / near.numpy()
     # (Measured: median 2.8, none below 1.6.)
     assert np.all(gain >= 1.0 - 1e-6) and np.median(gain) > 2.0, np.median(gain)
+    # Lines parallel to a cell's side, on grid lines, and vertical ones: finite lengths.
+    q = np.array([[20.0, 11.0, 0.5], [21.0, 12.0, 0.5], [20.0, 12.0, 0.5], [21.3, 12.7, 0.5]])
+    u = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 0.0, 1.0]])
+    _, (dq,) = mesa.eval_bounds(_vec(q), (0.0,), _vec(u, mi.Vector3f))
+    assert np.all(np.isfinite(dq.numpy())) and np.all(dq.numpy() >= 0.0)
 
 
 @pytest.mark.parametrize("ahead", [False, True], ids=["two-sided", "ahead"])

@@ -327,13 +327,16 @@ class ElevationLineBound:
         H2 = (u.x * u.y) * ((h11 - h10) - (h01 - h00)) * (hf._inv_dx * hf._inv_dy)
         # Distances along the line to the cell's sides, in grid units per metre.
         ru, rv = u.x * hf._inv_dx, u.y * hf._inv_dy
-        inv_u, inv_v = dr.rcp(dr.abs(ru)), dr.rcp(dr.abs(rv))
-        fwd = dr.minimum(dr.select(ru >= 0.0, 1.0 - fu, fu) * inv_u, dr.select(rv >= 0.0, 1.0 - fv, fv) * inv_v)
-        bwd = dr.minimum(dr.select(ru >= 0.0, fu, 1.0 - fu) * inv_u, dr.select(rv >= 0.0, fv, 1.0 - fv) * inv_v)
+
+        def along(room, rate):
+            # A line parallel to the side never meets it (and 0 * inf would be NaN).
+            return dr.select(rate != 0.0, room * dr.rcp(dr.abs(rate)), dr.inf)
+
+        fwd = dr.minimum(along(dr.select(ru >= 0.0, 1.0 - fu, fu), ru), along(dr.select(rv >= 0.0, 1.0 - fv, fv), rv))
+        bwd = dr.minimum(along(dr.select(ru >= 0.0, fu, 1.0 - fu), ru), along(dr.select(rv >= 0.0, fv, 1.0 - fv), rv))
         # A hair inside (the float32 cell coordinates round): never past the side.
         shrink = 1.0 - 1e-4
         return (H1, H2, dr.select(inside, bwd * shrink, 0.0), dr.select(inside, fwd * shrink, 0.0))
-
 
 
 def _two_sided(v, shifts, B0, B1, K, rho, knee=None):
