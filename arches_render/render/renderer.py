@@ -26,7 +26,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..imaging.welch import PixelMoments
+from ..imaging.pixel_moments import PixelMoments
 from ..materials.detail import pixel_spread
 from ..mesh.polygonize import polygonize
 from ..scene.material_keys import FIELD_ROOT

@@ -44,9 +44,8 @@ import numpy as np
 from arches_render.field.node import finite_box
 from arches_render.scene.paths import scene_file
 
-from .fracture_discs import STRUCTURES
-from .replication import replicate
-from .tile_cache import TileParams, cached_tile, load_tile
+# The tile builder (numba, scipy.spatial: 0.26 s to import) is imported where a scene
+# has a ``blocks`` node, not by every process that reads the node types.
 
 __all__ = ["NODE_TYPES", "tile_params", "tile_from_table"]
 
@@ -56,6 +55,8 @@ TILE_KEYS = ("structure", "tile_size", "point_radius", "spacing", "disc_radius",
 
 def tile_params(t):
     """:class:`~.tile_cache.TileParams` from the tile keys of a ``blocks`` table."""
+    from .fracture_discs import STRUCTURES
+    from .tile_cache import TileParams
     size = t.number("tile_size", 20.0, lo=1.0, hi=1000.0)
     r = t.number("point_radius", None, lo=size / 60.0, hi=size / 4.0)
     spacing = t.number("spacing", None, lo=0.0, hi=size, lo_open=True)
@@ -76,6 +77,7 @@ def tile_params(t):
 
 def tile_from_table(t, base_dir, progress=None):
     """The tile of a ``blocks`` table: its ``tile`` file, or built from its keys (cached)."""
+    from .tile_cache import cached_tile, load_tile
     if t.has("tile"):
         path = scene_file(t, "tile", (".npz",), base_dir, what="block tile")
         for key in TILE_KEYS:
@@ -99,6 +101,7 @@ def _range(t, key, default):
 
 
 def _blocks(t, ctx):
+    from .replication import replicate
     host = ctx.build(t.raw("host"), t, "host")
     tile = tile_from_table(t, ctx.base_dir, ctx.progress)
     if t.has("tile"):

@@ -36,7 +36,13 @@ from arches_render.field import evaluate
 from arches_render.npzfile import write_npz
 from arches_render.scene.array_files import Spec, read_arrays
 
-from .stack_kernels import _decode_window, _merged_intervals, _rewrite, column_heights
+
+# The kernels (numba: 0.13 s to import) are imported on first use, not by every process
+# that reads the scene node types (``layers`` registers its nodes through this module).
+def _kernels():
+    from . import stack_kernels
+    return stack_kernels
+
 
 #: Material ids. Stable materials (bedrock, sandstone, water) never flow; granular
 #: ones (sand, rock) flow by their angle of repose (section 3.4).
@@ -103,7 +109,7 @@ class MaterialStacks:
         if len(self.offsets) != nx * ny + 1 or self.offsets[-1] != len(self.material) \
                 or len(self.material) != len(self.count):
             raise ValueError("inconsistent CSR arrays (offsets, material, count)")
-        tops = column_heights(self.offsets, self.count)
+        tops = _kernels().column_heights(self.offsets, self.count)
         if tops.size and int(tops.max()) > self.n_levels:
             raise ValueError("a stack is higher than n_levels")
 
@@ -125,7 +131,7 @@ class MaterialStacks:
 
     def heights(self) -> np.ndarray:
         """Top of the highest non-air layer of every stack (metres, shape ``(ny, nx)``)."""
-        return (self.origin[2] + column_heights(self.offsets, self.count) * self.dz).reshape(self.ny, self.nx)
+        return (self.origin[2] + _kernels().column_heights(self.offsets, self.count) * self.dz).reshape(self.ny, self.nx)
 
     def column(self, i: int, j: int):
         """Layers of stack ``(i, j)`` as ``[(material name, z_bottom, z_top), ...]`` bottom-up."""
@@ -155,7 +161,7 @@ class MaterialStacks:
         """
         sel = np.zeros(256, dtype=np.bool_)
         sel[np.atleast_1d(np.asarray(materials, dtype=np.int64))] = True
-        off, lo, hi = _merged_intervals(self.offsets, self.material, self.count, sel)
+        off, lo, hi = _kernels()._merged_intervals(self.offsets, self.material, self.count, sel)
         z0 = self.origin[2]
         return off, z0 + lo * self.dz, z0 + hi * self.dz
 
@@ -401,12 +407,12 @@ class MaterialStacks:
         block = np.ascontiguousarray(block, dtype=np.int16)
         if len(cols) == 0:
             return self.copy()
-        off, m, n = _rewrite(self.offsets, self.material, self.count, cols, int(lev0), block, self.n_levels)
+        off, m, n = _kernels()._rewrite(self.offsets, self.material, self.count, cols, int(lev0), block, self.n_levels)
         return self.with_arrays(off, m, n)
 
     def dense_columns(self, cols, lev0, n):
         """Materials of levels ``[lev0, lev0 + n)`` of the given columns, ``(len(cols), n)`` uint8."""
-        return _decode_window(self.offsets, self.material, self.count,
+        return _kernels()._decode_window(self.offsets, self.material, self.count,
                               np.asarray(cols, dtype=np.int64), int(lev0), int(n))
 
 

@@ -26,12 +26,10 @@ the list's seed plus its index, so a list is deterministic.
 
 from __future__ import annotations
 
-from .deposit import deposit
-from .erosion import erode
 from .material_stacks import MaterialStacks
-from .sculpt import sculpt
-from .stabilization import stabilize
-from .sweep import sweep
+
+# The tools (numba kernels: 0.14 s to import) are imported when an operation runs, not
+# by every process that reads the scene node types (which import this module).
 
 TOOLS = ("sculpt", "sweep", "deposit", "erode", "stabilize")
 
@@ -68,12 +66,17 @@ def apply_operation(stacks: MaterialStacks, op: dict, seed=0, angles=None, sigma
     except TypeError as exc:   # an unknown or missing parameter
         raise ValueError(f"{tool}: {exc}") from None
     if settle or tool == "stabilize":
+        from .stabilization import stabilize
         stacks, stats = stabilize(stacks, angles)
         log["sweeps"] = stats["sweeps"]
     return stacks, log
 
 
 def _run(stacks, tool, op, log, seed, sigma):
+    from .deposit import deposit
+    from .erosion import erode
+    from .sculpt import sculpt
+    from .sweep import sweep
     if tool == "sculpt":
         stacks = sculpt(stacks, sigma=sigma, **op)
     elif tool == "sweep":
