@@ -269,10 +269,10 @@ def histogram_tables(arr: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarra
     from arches_render import cache
     from arches_render.npzfile import write_npz
 
-    arr = np.ascontiguousarray(arr, np.float32)
+    arr = np.ascontiguousarray(arr)
     code = cache.source_digest(Path(__file__).resolve().parent, ("textures", "mipmap"), str(LUT_SIZE))
     texels = hashlib.sha256(arr.tobytes()).hexdigest()
-    key = cache.cache_key(dict(shape=list(arr.shape), texels=texels), code)
+    key = cache.cache_key(dict(shape=list(arr.shape), dtype=arr.dtype.str, texels=texels), code)
 
     def build():
         gauss, lut = gaussianize(arr)

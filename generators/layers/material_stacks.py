@@ -131,7 +131,8 @@ class MaterialStacks:
 
     def heights(self) -> np.ndarray:
         """Top of the highest non-air layer of every stack (metres, shape ``(ny, nx)``)."""
-        return (self.origin[2] + _kernels().column_heights(self.offsets, self.count) * self.dz).reshape(self.ny, self.nx)
+        tops = _kernels().column_heights(self.offsets, self.count)
+        return (self.origin[2] + tops * self.dz).reshape(self.ny, self.nx)
 
     def column(self, i: int, j: int):
         """Layers of stack ``(i, j)`` as ``[(material name, z_bottom, z_top), ...]`` bottom-up."""
@@ -407,13 +408,14 @@ class MaterialStacks:
         block = np.ascontiguousarray(block, dtype=np.int16)
         if len(cols) == 0:
             return self.copy()
-        off, m, n = _kernels()._rewrite(self.offsets, self.material, self.count, cols, int(lev0), block, self.n_levels)
+        off, m, n = _kernels()._rewrite(self.offsets, self.material, self.count, cols, int(lev0), block,
+                                        self.n_levels)
         return self.with_arrays(off, m, n)
 
     def dense_columns(self, cols, lev0, n):
         """Materials of levels ``[lev0, lev0 + n)`` of the given columns, ``(len(cols), n)`` uint8."""
         return _kernels()._decode_window(self.offsets, self.material, self.count,
-                              np.asarray(cols, dtype=np.int64), int(lev0), int(n))
+                                         np.asarray(cols, dtype=np.int64), int(lev0), int(n))
 
 
 def _column_spec(column, dz):
