@@ -56,6 +56,8 @@ import mitsuba as mi
 import numpy as np
 
 from arches_render.field import Heightfield
+from arches_render.mesh.polygonize import TriangleMesh
+from arches_render.mesh.triangles import face_normals, merged_vertices, vertex_normals
 
 __all__ = ["FarField", "MirroredRelief", "far_field_mesh", "sea_ring_mesh", "ring_distances", "parse_far_field", "default_reach"]
 
@@ -209,11 +211,9 @@ def far_field_mesh(node, reach=None):
 
     Returns
     -------
-    trimesh.Trimesh
+    TriangleMesh
         Upward-facing triangles with vertex normals.
     """
-    import trimesh  # on use: slow to import (0.3 s), only scenes with a far field need it
-
     H = np.asarray(node.heights_np, np.float64)
     ny, nx = H.shape
     x0, y0, x1, y1 = node.extent
@@ -269,11 +269,10 @@ def far_field_mesh(node, reach=None):
         off += len(keep)
     # Merged vertices (frame and first ring share theirs) and upward faces, so that
     # vertex normals are smooth across the seams.
-    mesh = trimesh.Trimesh(np.concatenate(V), np.concatenate(F), process=True)
-    faces = mesh.faces.copy()
-    down = mesh.face_normals[:, 2] < 0
+    vertices, faces = merged_vertices(np.concatenate(V), np.concatenate(F))
+    down = face_normals(vertices, faces)[:, 2] < 0
     faces[down] = faces[down][:, ::-1]
-    return trimesh.Trimesh(mesh.vertices, faces, process=False)
+    return TriangleMesh(vertices, faces, vertex_normals(vertices, faces))
 
 
 def ring_distances(first: float, reach: float, growth: float = _GROWTH) -> list:
@@ -323,10 +322,8 @@ def sea_ring_mesh(extent, level, reach, first=None):
 
     Returns
     -------
-    trimesh.Trimesh
+    TriangleMesh
     """
-    import trimesh  # on use: slow to import (0.3 s), only scenes with a far field need it
-
     x0, y0, x1, y1 = extent
     first = max(x1 - x0, y1 - y0) / 64.0 if first is None else float(first)
     V = []
@@ -339,7 +336,8 @@ def sea_ring_mesh(extent, level, reach, first=None):
         for q in range(4):
             o0, o1, i0, i1 = o + q, o + (q + 1) % 4, i + q, i + (q + 1) % 4
             F += [(o0, o1, i1), (o0, i1, i0)]
-    return trimesh.Trimesh(np.array(V, np.float64), np.array(F), process=False)
+    vertices, faces = np.array(V, np.float64), np.array(F, np.int64)
+    return TriangleMesh(vertices, faces, vertex_normals(vertices, faces))
 
 
 def _mitsuba_mesh(name, mesh, bsdf):
@@ -349,7 +347,7 @@ def _mitsuba_mesh(name, mesh, bsdf):
     params = mi.traverse(m)
     params["vertex_positions"] = mi.Float(np.asarray(mesh.vertices, np.float32).ravel())
     params["faces"] = mi.UInt32(np.asarray(mesh.faces, np.uint32).ravel())
-    params["vertex_normals"] = mi.Float(np.asarray(mesh.vertex_normals, np.float32).ravel())
+    params["vertex_normals"] = mi.Float(np.asarray(mesh.normals, np.float32).ravel())
     params.update()
     return m
 
@@ -371,7 +369,7 @@ class FarField:
         return f"far_field{self.index}"
 
     def meshes(self) -> list:
-        """``[(material, trimesh.Trimesh)]``: the ground, then the sea ring if any."""
+        """``[(material, TriangleMesh)]``: the ground, then the sea ring if any."""
         out = [(self.material, far_field_mesh(self.node, self.reach))]
         if self.sea_level is not None:
             out.append((self.water_material, sea_ring_mesh(self.node.extent, self.sea_level, self.reach)))
