@@ -11,6 +11,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from helpers import variant
 
@@ -78,3 +79,17 @@ def test_far_field_rings_continue_a_ridge_past_the_border():
     border = np.array([(i * d, 0.0, Hn[0, i]) for i in range(n)] + [(w, j * d, Hn[j, -1]) for j in range(n)])
     gaps = np.min(np.linalg.norm(v[None, :, :] - border[:, None, :], axis=2), axis=1)
     assert gaps.max() < 1e-6
+
+
+def test_blur_and_interpolation_are_scipys_bit_for_bit():
+    """The relief's pyramid and lookups are written in numpy (no scipy.ndimage import in a
+    render process); they must be scipy's filters exactly."""
+    ndimage = pytest.importorskip("scipy.ndimage")
+    from generators.terrain.far_field import bilinear, gaussian_blur
+    rng = np.random.default_rng(8)
+    for shape in [(1, 1), (2, 9), (5, 3), (37, 53), (64, 64)]:
+        H = rng.normal(size=shape) * 100.0
+        assert np.array_equal(gaussian_blur(H), ndimage.gaussian_filter(H, 1.0, mode="mirror"))
+        v = np.concatenate([rng.uniform(-2.0, shape[0] + 2.0, 4000), np.arange(shape[0], dtype=float)])
+        u = np.concatenate([rng.uniform(-2.0, shape[1] + 2.0, 4000), np.full(shape[0], shape[1] - 1.0)])
+        assert np.array_equal(bilinear(H, v, u), ndimage.map_coordinates(H, [v, u], order=1, mode="nearest"))

@@ -105,11 +105,18 @@ def test_histogram_tables_are_the_same_bits_from_the_cache(tmp_path, monkeypatch
         T.histogram_tables(arr[::-1].copy())
 
 
-def test_window_maxima_are_scipys_maximum_filter():
+def test_window_filters_are_scipys():
     ndimage = pytest.importorskip("scipy.ndimage")
     from arches_render.field.heightfield import _window_max
+    from arches_render.field.window_filters import window_max, window_min
     rng = np.random.default_rng(4)
-    for shape in [(1, 1), (1, 7), (5, 3), (40, 33), (129, 64)]:
-        H = rng.normal(size=shape)
-        for w in (0, 1, 2, 8, 32, 128):
-            assert np.array_equal(_window_max(H, w), ndimage.maximum_filter(H, size=2 * w + 3, mode="nearest"))
+    for shape in [(1,), (9,), (1, 1), (1, 7), (5, 3), (40, 33), (129, 64), (3, 5, 7), (6, 1, 4)]:
+        a = rng.normal(size=shape)
+        for size in (1, 3, 5, 9, 19, 67, 259):
+            assert np.array_equal(window_max(a, size), ndimage.maximum_filter(a, size=size, mode="nearest"))
+            assert np.array_equal(window_min(a, size), ndimage.minimum_filter(a, size=size, mode="nearest"))
+        if a.ndim == 2:
+            for w in (0, 2, 8, 128):  # the heightfield's windows: 2 w + 3 samples
+                assert np.array_equal(_window_max(a, w), ndimage.maximum_filter(a, size=2 * w + 3, mode="nearest"))
+    with pytest.raises(ValueError, match="odd"):
+        window_max(np.zeros(4), 4)

@@ -43,6 +43,7 @@ import mitsuba as mi
 import numpy as np
 
 from .node import Node, cell_index, clip_index, opaque_float
+from .window_filters import window_max
 
 
 #: Largest height or extent coordinate (m), ten times Earth's radius: beyond it a value
@@ -241,33 +242,6 @@ def _window_max(H: np.ndarray, w: int) -> np.ndarray:
     """Max of the samples a bilinear cell within ``w`` cells of each cell can touch.
 
     Cell ``(j, i)`` spans samples ``i..i+1``; cells within ``w`` span samples
-    ``i-w..i+w+1``; a centred window of ``2w + 3`` samples covers them: what
-    ``scipy.ndimage.maximum_filter(H, 2 w + 3, mode="nearest")`` returns, bit for bit
-    (a maximum is exact), here in numpy because importing ``scipy.ndimage`` took 0.16 s
-    of every process that renders a heightfield.
+    ``i-w..i+w+1``; a centred window of ``2w + 3`` samples covers them.
     """
-    return _running_max(_running_max(H, 2 * w + 3, 0), 2 * w + 3, 1)
-
-
-def _running_max(a: np.ndarray, size: int, axis: int) -> np.ndarray:
-    """Maximum over centred windows of odd ``size`` along ``axis``, edges repeated, in
-    ``O(n log size)``: maxima over runs of ``2^k`` samples by doubling, then each window
-    as the maximum of two runs that cover it."""
-    r = size // 2
-    pad = [(0, 0)] * a.ndim
-    pad[axis] = (r, r)
-    run = np.pad(a, pad, mode="edge")
-    n = a.shape[axis]
-
-    def part(start, stop):
-        index = [slice(None)] * a.ndim
-        index[axis] = slice(start, stop)
-        return run[tuple(index)]
-
-    length = 1
-    while 2 * length <= size:
-        m = run.shape[axis]
-        run = np.maximum(part(0, m - length), part(length, m))
-        length *= 2
-    # Window i covers padded samples i .. i + size - 1: runs starting at i and i + size - length.
-    return np.maximum(part(0, n), part(size - length, size - length + n))
+    return window_max(H, 2 * w + 3)

@@ -94,6 +94,7 @@ import numpy as np
 
 from arches_render.field.lod import select_table
 from arches_render.field.noise import fbm_curvature, fbm_lipschitz, fbm_range
+from arches_render.field.window_filters import window_max, window_min
 
 #: ``max |d/du smoothstep(u)|``: the taper weight is ``1.5 / taper``-Lipschitz.
 TAPER_SLOPE = 1.5
@@ -149,14 +150,13 @@ def grid_derivative_ranges(H: np.ndarray, dx: float, dy: float) -> list[np.ndarr
     list of numpy.ndarray
         Four float32 arrays of ``ny * nx``, rounded outwards.
     """
-    from scipy.ndimage import maximum_filter, minimum_filter
     H = np.asarray(H, dtype=np.float64)
     rows = (np.diff(H[:-1], axis=1) / dx, np.diff(H[1:], axis=1) / dx)      # dH/dx, bottom and top
     cols = (np.diff(H[:, :-1], axis=0) / dy, np.diff(H[:, 1:], axis=0) / dy)  # dH/dy, left and right
     out = []
     for a, b in (rows, cols):
-        lo = minimum_filter(np.minimum(a, b), size=3, mode="nearest")
-        hi = maximum_filter(np.maximum(a, b), size=3, mode="nearest")
+        lo = window_min(np.minimum(a, b), 3)
+        hi = window_max(np.maximum(a, b), 3)
         for arr, op in ((lo, np.minimum), (hi, np.maximum)):
             for sl in ((0, slice(None)), (-1, slice(None)), (slice(None), 0), (slice(None), -1)):
                 arr[sl] = op(arr[sl], 0.0)

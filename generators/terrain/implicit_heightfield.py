@@ -99,6 +99,7 @@ from arches_render.field.heightfield import height_grid
 from arches_render.field.lod import OctaveLOD
 from arches_render.field.node import box_distance, box_gap, box_reach, clip_index, one_sided_lanes, opaque_float
 from arches_render.field.noise import fbm, fbm_gradient, fbm_lipschitz, fbm_range
+from arches_render.field.window_filters import window_max
 
 from .elevation_line import ElevationLineBound
 from .falloff import G_SLOPE, falloff_slope_max, g_dr, sigmoid_coefficients, sigmoid_dr, sigmoid_slope
@@ -406,10 +407,9 @@ def _near_cell_slopes(H, dx, dy):
     cells around cell ``(j, i)`` (the last row and column repeat the cells before
     them, as the cell lookup clamps). A bilinear cell's slope is at most
     ``hypot(max |h10 - h00|, |h11 - h01|) / dx, max(|h01 - h00|, |h11 - h10|) / dy)``."""
-    from scipy.ndimage import maximum_filter
     sx = np.maximum(np.abs(H[:-1, 1:] - H[:-1, :-1]), np.abs(H[1:, 1:] - H[1:, :-1])) / dx
     sy = np.maximum(np.abs(H[1:, :-1] - H[:-1, :-1]), np.abs(H[1:, 1:] - H[:-1, 1:])) / dy
-    cells = maximum_filter(np.hypot(sx, sy), size=3, mode="nearest")
+    cells = window_max(np.hypot(sx, sy), 3)
     out = np.zeros_like(H, dtype=np.float64)
     out[:-1, :-1] = cells
     out[-1, :-1], out[:, -1] = out[-2, :-1], out[:, -2]

@@ -85,6 +85,7 @@ import numpy as np
 from arches_render.field.lod import OctaveLOD
 from arches_render.field.node import Node, box_distance, opaque_float
 from arches_render.field.noise import fbm, fbm_lipschitz
+from arches_render.field.window_filters import window_max
 from arches_render.field.brick_grid import BrickLayout
 from arches_render.field.primitive_set import empty_distance, grid_lists, unlisted_gaps
 
@@ -271,7 +272,6 @@ class SkeletalSet(Node):
     def _cell_bounds(self, start, count, index):
         """Per-cell gradient bounds and value ranges (per group maxima), and their
         3x3x3-neighbourhood maxima for local distance bounds (see ``local_lipschitz``)."""
-        from scipy.ndimage import maximum_filter
         lp, e = self._per_prim_lipschitz, self.energy_np
         n_cells = len(count)
         cell_of = np.repeat(np.arange(n_cells), count)
@@ -294,8 +294,8 @@ class SkeletalSet(Node):
         self._lipschitz = float(cell_l.max())
         self.value_max, self.value_min = float(cell_m.max()), float(cell_lo.min())
         shape = tuple(int(v) for v in self.res[::-1])  # (z, y, x) as the cell index
-        self.cell_lipschitz_np = maximum_filter(cell_l.reshape(shape), size=3, mode="nearest").ravel()
-        self.cell_value_max_np = maximum_filter(cell_m.reshape(shape), size=3, mode="nearest").ravel()
+        self.cell_lipschitz_np = window_max(cell_l.reshape(shape), 3).ravel()
+        self.cell_value_max_np = window_max(cell_m.reshape(shape), 3).ravel()
 
     @property
     def lipschitz(self):
