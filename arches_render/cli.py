@@ -26,23 +26,38 @@ from .scene import SceneError, paths
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
 
-#: The core subcommands, in the order of ``arches-render --help``.
+#: The core subcommands (modules of :mod:`arches_render.commands`, each registering the
+#: subcommand of its name), in the order of ``arches-render --help``.
 CORE_COMMANDS = (render, turntable, mesh, preview, info)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The ``arches-render`` parser: the core subcommands, then every generator's."""
+def command_modules(argv=None) -> list:
+    """The subcommand modules to register: only the named one where ``argv`` names a core
+    subcommand, else every core and generator subcommand.
+
+    A ``render`` must not import the generators' subcommands (``amplify``'s numba, trimesh
+    and scipy: 0.4 s of every render process).
+    """
+    chosen = next((a for a in argv or () if not a.startswith("-")), None)
+    named = [m for m in CORE_COMMANDS if m.__name__.rsplit(".", 1)[-1] == chosen]
+    return named or [*CORE_COMMANDS, *extensions.commands()]
+
+
+def build_parser(argv=None) -> argparse.ArgumentParser:
+    """The ``arches-render`` parser: the core subcommands, then every generator's (only the
+    subcommand that ``argv`` names, where it is a core one: :func:`command_modules`)."""
     p = argparse.ArgumentParser(prog="arches-render", description=__doc__.splitlines()[0])
     p.add_argument("--version", action="version", version=f"arches-render {__version__}")
     sub = p.add_subparsers(dest="command", required=True, metavar="SUBCOMMAND")
-    for module in (*CORE_COMMANDS, *extensions.commands()):
+    for module in command_modules(argv):
         module.register(sub)
     return p
 
 
 def main(argv=None) -> int:
     """Entry point of the ``arches-render`` console script."""
-    args = build_parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = build_parser(argv).parse_args(argv)
     try:
         set_variant()
         with paths.allowed(getattr(args, "allow_path", None) or ()):

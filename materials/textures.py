@@ -279,7 +279,7 @@ def histogram_tables(arr: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarra
         return (gauss, *filter_tables(gauss, lut))
 
     def load(f):
-        with np.load(f) as z:
+        with np.load(f, allow_pickle=False) as z:
             out = (z["gauss"], z["tables"], z["sigma"])
         if out[0].shape != arr.shape:
             raise ValueError(f"texture tables of shape {out[0].shape}, expected {arr.shape}")

@@ -120,3 +120,30 @@ def test_window_filters_are_scipys():
                 assert np.array_equal(_window_max(a, w), ndimage.maximum_filter(a, size=2 * w + 3, mode="nearest"))
     with pytest.raises(ValueError, match="odd"):
         window_max(np.zeros(4), 4)
+
+
+CLI_RENDER = """
+import json, sys
+from arches_render.cli import build_parser
+args = build_parser(sys.argv[1:]).parse_args(sys.argv[1:])
+print(json.dumps({"command": args.command, "modules": sorted(sys.modules)}))
+"""
+
+
+def test_a_render_command_registers_only_render():
+    """``arches-render render`` imports no generator's subcommand (``amplify``: numba, trimesh
+    and scipy) nor the turntable's scipy.interpolate; ``--help`` and unknown names see them all."""
+    proc = subprocess.run([sys.executable, "-c", CLI_RENDER, "render", "scene.toml", "--spp", "4"], cwd=REPO,
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert out["command"] == "render"
+    loaded = set(out["modules"])
+    assert "arches_render.commands.render" in loaded
+    others = {"arches_render.generators.terrain.command", "arches_render.generators.terrain.amplify",
+              "numba", "trimesh", "scipy.interpolate", "scipy.ndimage", "scipy.special"}
+    assert not others & loaded, sorted(others & loaded)
+    from arches_render.cli import build_parser
+    import argparse
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    assert {"render", "turntable", "amplify", "rocks"} <= set(sub.choices)
