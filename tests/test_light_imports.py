@@ -78,6 +78,8 @@ def test_normal_quantile_and_cdf_match_scipy():
     special = pytest.importorskip("scipy.special")
     from arches_render.materials.textures import normal_cdf, normal_quantile
     u = np.concatenate([np.linspace(1e-6, 1 - 1e-6, 20001), [1e-12, 0.5, 1 - 1e-12]])
+    # AS 241 and Cephes' ndtri are two rational approximations, each accurate to ~1e-16:
+    # measured 1.8e-15 apart at most (1.0e-15 relative), far below the float32 tables.
     assert np.allclose(normal_quantile(u), special.ndtri(u), rtol=1e-14, atol=1e-14)
     x = np.linspace(-9.0, 9.0, 20001)
     # libm's erfc and Cephes' ndtr differ by up to 1.5e-14 relative in the far tail
