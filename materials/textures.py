@@ -69,6 +69,9 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from arches_render import cache
+from arches_render.npzfile import write_npz
+
 from .mipmap import MipTexture, mip_levels
 
 __all__ = ["TEXTURE_DIR", "TILINGS", "TRIANGLE_EDGE", "texture_path", "load_texture", "RepeatTexture",
@@ -266,9 +269,6 @@ def histogram_tables(arr: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarra
     (gauss, tables, sigma)
         As :func:`gaussianize` and :func:`filter_tables` return them.
     """
-    from arches_render import cache
-    from arches_render.npzfile import write_npz
-
     arr = np.ascontiguousarray(arr)
     code = cache.source_digest(Path(__file__).resolve().parent, ("textures", "mipmap"), str(LUT_SIZE))
     texels = hashlib.sha256(arr.tobytes()).hexdigest()
