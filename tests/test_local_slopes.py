@@ -217,9 +217,9 @@ def test_footprint_field_of_the_terrain_skips_octaves_and_keeps_its_bounds():
 def _primitive_gaps(node, p):
     """``min_i (rho_i(p) - D_max,i)`` over the set's primitives (numpy): how far ``p`` is
     from the nearest support's outer envelope."""
-    a = np.column_stack([node._ax.numpy(), node._ay.numpy(), node._az.numpy()]).astype(np.float64)
-    ba = np.column_stack([node._bax.numpy(), node._bay.numpy(), node._baz.numpy()]).astype(np.float64)
-    R, core = node._R.numpy().astype(np.float64), node._core.numpy().astype(np.float64)
+    f32 = lambda x: np.asarray(x, dtype=np.float32).astype(np.float64)  # the kernel's numbers  # noqa: E731
+    a, ba = f32(node.a_np), f32(node.b_np - node.a_np)
+    R, core = f32(node.radius_np), f32(node.core_np)
     span = node.noise["span"] if node.noise else 0.0
     pa = p[:, None, :] - a[None]
     L2 = np.maximum(np.sum(ba * ba, axis=1), 1e-30)

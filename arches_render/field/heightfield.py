@@ -42,7 +42,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .node import Node, cell_index, clip_index, opaque_float
+from .node import Node, cell_index, clip_index, jit_floats, opaque_float
+from .packed_columns import gather_columns, pack_columns
 from .window_filters import window_max
 
 
@@ -116,10 +117,15 @@ class Heightfield(Node):
         sy = np.abs(np.diff(H, axis=0)).max() / self.dy
         self.slope_bound = float(np.hypot(sx, sy))
         self.windows = [w for w in (2, 8, 32, 128) if w < max(self.nx, self.ny)]
-        self._maxima = [mi.Float(_window_max(H, w).astype(np.float32).ravel()) for w in self.windows]
+        # The window maxima of a sample side by side (padded to a power of two): one
+        # packet gather reads them all (:func:`.packed_columns.gather_columns`).
+        self._maxima, self._maxima_width = pack_columns([_window_max(H, w) for w in self.windows])
         self._radii = [opaque_float(w * min(self.dx, self.dy)) for w in self.windows]
         self._inv_L = opaque_float(1.0 / np.sqrt(1.0 + self.slope_bound ** 2))
-        self._data = mi.Float(H.astype(np.float32).ravel())
+        # Each cell's four corner samples side by side: a lookup is one packet gather
+        # of 16 bytes instead of four scalar gathers (the heights, 4x).
+        corners = (H[:-1, :-1], H[:-1, 1:], H[1:, :-1], H[1:, 1:])
+        self._corners = jit_floats(np.stack(corners, axis=-1))
         self._x0, self._y0 = opaque_float(x0), opaque_float(y0)
         self._inv_dx, self._inv_dy = opaque_float(1.0 / self.dx), opaque_float(1.0 / self.dy)
         c = np.array([(x0 + x1) / 2, (y0 + y1) / 2, (self.base_np + hmax) / 2])
@@ -136,12 +142,12 @@ class Heightfield(Node):
         i = dr.minimum(mi.UInt32(u), self.nx - 2)
         j = dr.minimum(mi.UInt32(v), self.ny - 2)
         fu, fv = u - mi.Float(i), v - mi.Float(j)
-        k = j * self.nx + i
-        h00 = dr.gather(mi.Float, self._data, k)
-        h10 = dr.gather(mi.Float, self._data, k + 1)
-        h01 = dr.gather(mi.Float, self._data, k + self.nx)
-        h11 = dr.gather(mi.Float, self._data, k + self.nx + 1)
+        h00, h10, h01, h11 = dr.gather(mi.Vector4f, self._corners, j * (self.nx - 1) + i)
         return h00, h10, h01, h11, fu, fv
+
+    def window_maxima(self, k):
+        """The maxima ``M_w`` of every window (module docstring) at sample ``k``."""
+        return gather_columns(self._maxima, k, self._maxima_width, len(self.windows))
 
     def height(self, x, y):
         """Bilinear elevation at ``(x, y)`` (``mi.Float`` each), clamped at the edges."""
@@ -164,7 +170,7 @@ class Heightfield(Node):
         u = clip_index((p.x - self._x0) * self._inv_dx, 0.0, self.nx - 1.0)
         v = clip_index((p.y - self._y0) * self._inv_dy, 0.0, self.ny - 1.0)
         k = dr.minimum(mi.UInt32(v), self.ny - 2) * self.nx + dr.minimum(mi.UInt32(u), self.nx - 2)
-        above = [p.z - dr.gather(mi.Float, maxima, k) for maxima in self._maxima]
+        above = [p.z - m for m in self.window_maxima(k)]
         if direction is not None:
             inv_run = dr.rcp(dr.maximum(dr.sqrt(dr.square(direction.x) + dr.square(direction.y)), 1e-7))
             inv_drop = dr.rcp(dr.maximum(dr.abs(direction.z), 1e-7))

@@ -83,6 +83,7 @@ import mitsuba as mi
 import numpy as np
 
 from arches_render.field.node import Node, box_distance, cell_index, jit_floats, opaque_float
+from arches_render.field.packed_columns import gather_columns, pack_columns, uint_column
 from arches_render.field.noise import corner_hash, fade, fbm_lipschitz, fbm_range, grad_dot
 from arches_render.field.operators import smooth_max
 
@@ -237,7 +238,10 @@ class BlockField(Node):
         self._start, self._count, self._index = mi.UInt32(start), mi.UInt32(count), mi.UInt32(index)
         # Interleaved (u_x, u_y, u_z, w) per plane: one packet gather per plane.
         self._planes = jit_floats(np.hstack([tile.normals, tile.offsets[:, None]]))
-        self._pstart, self._pcount = mi.UInt32(tile.start), mi.UInt32(tile.count)
+        # Per block, side by side (one packet gather a block): the offsets of its six box
+        # faces (its first six planes, unit axes: see _fold), its first plane and count.
+        faces = tile.offsets[np.asarray(tile.start)[:, None] + np.arange(6)]
+        self._blocks, _ = pack_columns([*faces.T, np.asarray(tile.start), np.asarray(tile.count)])
         self._s, self._inv_s = opaque_float(s), opaque_float(1.0 / s)
         self._inv_cell = opaque_float(1.0 / cell)
         self._m, self._R = opaque_float(self.m_np), opaque_float(self.R_np)
@@ -291,9 +295,8 @@ class BlockField(Node):
                                            np.concatenate(prios), int(np.prod(res))))
         self.world_list_len, self.world_max_per_cell = len(index), int(count.max())
         self._wstart, self._wcount, self._windex = mi.UInt32(start), mi.UInt32(count), mi.UInt32(index)
-        f32 = lambda x: mi.Float(np.ascontiguousarray(x, dtype=np.float32))  # noqa: E731
-        self._cblock = mi.UInt32(b_idx.astype(np.uint32))
-        self._cx, self._cy, self._cz = (f32(shift[:, k]) for k in range(3))
+        # A copy's shift and block side by side: one packet gather a copy.
+        self._copies, _ = pack_columns([*(shift[:, k] for k in range(3)), b_idx])
         from scipy.ndimage import distance_transform_edt
         k = distance_transform_edt(~occ)
         self._wempty = mi.Float(np.maximum((k - np.sqrt(3.0)) * cw, 0.0).reshape(-1).astype(np.float32))
@@ -319,11 +322,11 @@ class BlockField(Node):
     def _fold(self, b, x, present, best, det):
         """``(max(best, b_b(x)), v)`` where present; the plane fold stops once below
         ``best``, so ``v >= b_b(x)`` is the value or an upper bound of it."""
-        k0 = dr.gather(mi.UInt32, self._pstart, b)
-        k1 = dr.select(present, k0 + dr.gather(mi.UInt32, self._pcount, b), k0)
+        *w, k0, n = gather_columns(self._blocks, b, 8, 8)
+        k0 = uint_column(k0)
+        k1 = dr.select(present, k0 + uint_column(n), k0)
         # The first six planes of a block are its box faces +x, +y, +z, -x, -y, -z
         # (see tile_cache.build_tile): unit normals, so no dot products.
-        w = [dr.gather(mi.Float, self._planes, 4 * (k0 + i) + 3) for i in range(6)]
         box = (w[0] - x.x, w[1] - x.y, w[2] - x.z, w[3] + x.x, w[4] + x.y, w[5] + x.z)
         v = mi.Float(1e30)
         for axis, h in zip((0, 1, 2, 0, 1, 2), box):
@@ -376,10 +379,9 @@ class BlockField(Node):
         det = self._detail(p) if self.warp_np > 0 else None
 
         def body(j, best, upper):
-            c = dr.gather(mi.UInt32, self._windex, start + j)
-            b = dr.gather(mi.UInt32, self._cblock, c)
-            x = p - mi.Vector3f(dr.gather(mi.Float, self._cx, c), dr.gather(mi.Float, self._cy, c),
-                                dr.gather(mi.Float, self._cz, c))
+            cx, cy, cz, b = gather_columns(self._copies, dr.gather(mi.UInt32, self._windex, start + j), 4, 4)
+            b = uint_column(b)
+            x = p - mi.Vector3f(cx, cy, cz)
             best, v = self._fold(b, x, mi.Bool(True), best, det)
             return j + 1, best, dr.maximum(upper, v)
 

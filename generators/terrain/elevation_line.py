@@ -94,6 +94,7 @@ import numpy as np
 
 from arches_render.field.lod import select_table
 from arches_render.field.noise import fbm_curvature, fbm_lipschitz, fbm_range
+from arches_render.field.packed_columns import gather_columns, pack_columns
 from arches_render.field.window_filters import window_max, window_min
 
 #: ``max |d/du smoothstep(u)|``: the taper weight is ``1.5 / taper``-Lipschitz.
@@ -183,7 +184,8 @@ class ElevationLineBound:
     def __init__(self, hf):
         self.hf = hf
         self.cell = float(min(hf.dx, hf.dy))
-        self._ranges = [mi.Float(a) for a in grid_derivative_ranges(hf.heights_np, hf.dx, hf.dy)]
+        # A sample's four ranges side by side: one packet gather.
+        self._ranges, _ = pack_columns(grid_derivative_ranges(hf.heights_np, hf.dx, hf.dy))
         self.bump_slope = float(hf.bumps.lipschitz) if hf.bumps is not None else 0.0
         amp = hf.amp
         self.amp = amp
@@ -267,7 +269,7 @@ class ElevationLineBound:
         """The :class:`LineTerms` of the line through ``p`` along ``u`` (module docstring;
         arguments as :meth:`free_lengths`)."""
         run = dr.sqrt(dr.square(u.x) + dr.square(u.y))
-        xlo, xhi, ylo, yhi = (dr.gather(mi.Float, r, k) for r in self._ranges)
+        xlo, xhi, ylo, yhi = gather_columns(self._ranges, k, 4, 4)
         h_lo = dr.minimum(u.x * xlo, u.x * xhi) + dr.minimum(u.y * ylo, u.y * yhi)
         h_hi = dr.maximum(u.x * xlo, u.x * xhi) + dr.maximum(u.y * ylo, u.y * yhi)
         rho = self.cell * dr.rcp(dr.maximum(run, 1e-7))

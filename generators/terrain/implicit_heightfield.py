@@ -308,7 +308,7 @@ class ImplicitHeightfield(Heightfield):
         u = clip_index((p.x - self._x0) * self._inv_dx, 0.0, self.nx - 1.0)
         w = clip_index((p.y - self._y0) * self._inv_dy, 0.0, self.ny - 1.0)
         k = dr.minimum(mi.UInt32(w), self.ny - 2) * self.nx + dr.minimum(mi.UInt32(u), self.nx - 2)
-        above = [p.z - dr.gather(mi.Float, maxima, k) - self._extra for maxima in self._maxima]
+        above = [p.z - m - self._extra for m in self.window_maxima(k)]
         if direction is not None:
             inv_run = dr.rcp(dr.maximum(dr.sqrt(dr.square(direction.x) + dr.square(direction.y)), 1e-7))
             inv_drop = dr.rcp(dr.maximum(dr.abs(direction.z), 1e-7))

@@ -1,7 +1,8 @@
 """Per-primitive bounds of a :class:`~.skeletal_set.SkeletalSet`: distances to level sets and local slopes.
 
-The functions take the set (``node``), a primitive index ``k`` (``mi.UInt32``), its
-energy ``e`` and its ``geometry`` at ``p`` (``(g, rho, r, D)`` from the set's falloff:
+The functions take the set (``node``), primitive ``k``'s constants ``prim`` (a
+:class:`.skeletal_records.Primitive`: energy ``e``, radii, the bounds' factors) and its
+``geometry`` at ``p`` (``(g, rho, r, D)`` from the set's falloff:
 ``rho = max(r - c, 0)``, ``r`` the distance to the skeleton, ``D`` the star radius,
 exact where the noise was evaluated, ``D_max`` elsewhere). The set's loop over a
 point's list combines them (minimum, maximum or sum); the notation is that of
@@ -97,60 +98,59 @@ FAR = 1e10
 __all__ = ["level_bound", "slanted_bound", "core_bound", "local_slope", "footprint_error", "quiet_within"]
 
 
-def level_bound(node, k, e, geometry, u, rate=None):
+def level_bound(node, prim, geometry, u, rate=None):
     """Lower bound of the distance from ``p`` to ``{F_k >= u}`` (``u > 0``), or
     ``None`` where primitive ``k`` cannot reach ``u`` (module docstring, "Distance
     bounds"): returns ``(acts, bound)``."""
     _, rho, r, D, *_ = geometry
+    e = prim.e
     if node.combine == "max":
         x = dr.sqrt(dr.maximum(1.0 - dr.cbrt(dr.minimum(u / dr.maximum(e, 1e-30), 1.0)), 0.0))
         acts = e >= u
     else:
         x, acts = 1.0, e > 0.0
-    bound = rho - x * dr.gather(mi.Float, node._reach_R, k)  # with D_max
+    bound = rho - x * prim.reach_R  # with D_max
     if node.noise:
         # With the noise at p: within r/2 of p, |grad D| <= K (sigma_s + 2 (c + R) / r)
         # (+ K kappa s for a footprint's fade, module docstring).
-        spin = dr.gather(mi.Float, node._seg, k) + 2.0 * (dr.gather(mi.Float, node._core, k)
-                                                         + dr.gather(mi.Float, node._R, k)) \
-            * dr.rcp(dr.maximum(r, 1e-12))
+        spin = prim.seg + 2.0 * (prim.core + prim.R) * dr.rcp(dr.maximum(r, 1e-12))
         if rate is not None:
             spin = spin + node._lod.kappa * rate
-        lip_D = dr.gather(mi.Float, node._noise_K, k) * spin
+        lip_D = prim.noise_K * spin
         local = dr.minimum(0.5 * r, (rho - x * D) * dr.rcp(1.0 + x * lip_D))
         bound = dr.maximum(bound, local)
     return acts, bound
 
 
-def slanted_bound(node, k, e, geometry, u0, slope, cap, rate=None):
+def slanted_bound(node, prim, geometry, u0, slope, cap, rate=None):
     """Lower bound of the radius ``delta`` of a ball around ``p`` in which
     ``F_k(q) < u0 - slope delta`` (module docstring, "Slanted levels"), or ``FAR``
     where primitive ``k`` reaches no level of the ball. ``u0 > 0``, ``slope > 0`` and
     ``cap`` (the largest radius the caller accepts, ``< u0 / slope``) per lane.
 
     Two passes of :func:`level_bound`: ``a = min(d_k(u0), cap)``, then ``d_k(u0 - slope a)``."""
-    acts, first = level_bound(node, k, e, geometry, u0, rate)
+    acts, first = level_bound(node, prim, geometry, u0, rate)
     a = dr.select(acts, dr.clip(first, 0.0, cap), cap)
-    acts, second = level_bound(node, k, e, geometry, u0 - slope * a, rate)
+    acts, second = level_bound(node, prim, geometry, u0 - slope * a, rate)
     return dr.select(acts, second, FAR)
 
 
-def core_bound(node, k, e, geometry, u):
+def core_bound(node, prim, geometry, u):
     """Carving sets (every ``e <= 0``): a lower bound of the distance from ``p`` to
     ``{F >= u}`` (``u < 0``) from primitive ``k`` alone (module docstring, "Cores"):
     ``x D_min - rho`` with ``x = sqrt(1 - (u / e)^(1/3))``, 0 where ``|e| <= |u|``."""
     _, rho, *_ = geometry
-    x = dr.sqrt(dr.maximum(1.0 - dr.cbrt(dr.minimum(u * dr.rcp(dr.minimum(e, -1e-30)), 1.0)), 0.0))
-    return dr.maximum(x * dr.gather(mi.Float, node._Dmin, k) - rho, 0.0)
+    x = dr.sqrt(dr.maximum(1.0 - dr.cbrt(dr.minimum(u * dr.rcp(dr.minimum(prim.e, -1e-30)), 1.0)), 0.0))
+    return dr.maximum(x * prim.Dmin - rho, 0.0)
 
 
-def local_slope(node, k, e, geometry, radius, rate=None):
+def local_slope(node, prim, geometry, radius, rate=None):
     """Bound of ``|grad F_k|`` in the ball of radius ``radius`` around ``p``
     (module docstring, "Local slopes"): ``|e| max |g'| L_k`` over the star
     distances the ball can hold; with the line's ``along`` in ``geometry`` (noise-free
     sets), of the derivative along the line within ``radius`` ("Along a line")."""
     _, rho, r, D, *along = geometry
-    Ld = dr.gather(mi.Float, node._Ld, k)
+    Ld = prim.Ld
     if along:
         # |grad r . u| moves by at most |q - p| / (r(p) - |q - p|) along the line.
         turn = dr.select(r > 2.0 * radius, radius * dr.rcp(dr.maximum(r - radius, 1e-30)), 1.0)
@@ -160,13 +160,12 @@ def local_slope(node, k, e, geometry, radius, rate=None):
     # d~ at p (D is exact where the noise was evaluated; D_max elsewhere, where
     # rho >= D_max and the clamp to 1 makes it exact too).
     x = dr.minimum(rho * dr.rcp(dr.maximum(D, 1e-30)), 1.0)
-    slope = dr.abs(e) * falloff_slope_max(x - radius * Ld, x + radius * Ld) * Ld
+    slope = dr.abs(prim.e) * falloff_slope_max(x - radius * Ld, x + radius * Ld) * Ld
     # A ball that misses the support (rho 1-Lipschitz: rho > D_max in all of it) has
     # slope 0 from this primitive. Without this, every primitive of a cell's slope list
     # counted as if the ball touched its support: a Jacksboro channel wall summed
     # 14 against the one acting primitive's 4.75.
-    R = dr.gather(mi.Float, node._R, k)
-    D_max = R * node._reach if node.noise else R
+    D_max = prim.R * node._reach if node.noise else prim.R
     return dr.select(rho - radius > D_max, 0.0, slope)
 
 

@@ -92,6 +92,7 @@ from arches_render.field.primitive_set import empty_distance, grid_lists, unlist
 from .falloff import G_SLOPE, g_dr
 from .skeletal_bounds import FAR, core_bound, footprint_error, level_bound, local_slope, quiet_within, slanted_bound
 from .skeletal_params import noise_params, primitive_arrays
+from .skeletal_records import RECORD, gather_primitive, pack_records
 
 #: Largest radius of the balls in which ``eval_local`` bounds slopes, in cell edges.
 SLOPE_REACH = 0.125
@@ -174,9 +175,9 @@ class SkeletalSet(Node):
         self._per_prim_lipschitz = self._prim_lipschitz()
         # Slope of the star distance d~ per primitive (module docstring, "Local slopes").
         span0 = self.noise["span"] if self.noise else 0.0
-        self._Dmin = mi.Float(np.ascontiguousarray(R * (1.0 - span0) * (1.0 - 1e-6), dtype=np.float32))
-        self._Ld = mi.Float(np.ascontiguousarray(self._distance_slopes(), dtype=np.float32)
-                            * np.float32(1.0 + 1e-6))
+        Dmin = np.ascontiguousarray(R * (1.0 - span0) * (1.0 - 1e-6), dtype=np.float32)
+        Ld = np.ascontiguousarray(self._distance_slopes(), dtype=np.float32) * np.float32(1.0 + 1e-6)
+        reach_R = seg = noise_K = None
         self._cell_bounds(start, count, index)
         # Levels below the threshold ({F >= u}, u > 0) exist only with positive energies:
         # their distance bounds (module docstring) use the empty cells and, per
@@ -214,12 +215,12 @@ class SkeletalSet(Node):
             self._near = (mi.UInt32(compact(near[0])), mi.UInt32(compact(near[1])), mi.UInt32(near[2]))
             self._unlisted = mi.Float(compact(unlisted))
             self.near_len = len(near[2])
-            self._reach_R = mi.Float(np.ascontiguousarray(R * (1.0 + span), dtype=np.float32))
+            reach_R = np.ascontiguousarray(R * (1.0 + span), dtype=np.float32)
             if self.noise:
                 nz = self.noise
                 slope_n = fbm_lipschitz(int(nz["octaves"]), nz["lacunarity"], nz["gain"]) / nz["wavelength"]
-                self._noise_K = mi.Float(np.ascontiguousarray(R * nz["amplitude"] * slope_n, dtype=np.float32))
-                self._seg = mi.Float((np.linalg.norm(b - a, axis=1) > 0).astype(np.float32))
+                noise_K = np.ascontiguousarray(R * nz["amplitude"] * slope_n, dtype=np.float32)
+                seg = (np.linalg.norm(b - a, axis=1) > 0).astype(np.float32)
             self._support_lo = [opaque_float(v) for v in self.support_lo]
             self._support_hi = [opaque_float(v) for v in self.support_hi]
             self._peak = opaque_float(self.value_max * (1.0 + 1e-6))  # float32 e may round up
@@ -228,14 +229,9 @@ class SkeletalSet(Node):
         self._cell_edge = opaque_float(cell)
         self._near_reach = opaque_float(NEAR_REACH * cell)
 
-        f32 = lambda x: mi.Float(np.ascontiguousarray(x, dtype=np.float32))  # noqa: E731
         self._start, self._count = mi.UInt32(compact(start)), mi.UInt32(compact(count))
         self._index = mi.UInt32(index)
-        self._ax, self._ay, self._az = (f32(a[:, i]) for i in range(3))
-        self._bax, self._bay, self._baz = (f32(b[:, i] - a[:, i]) for i in range(3))
-        self._inv_len2 = f32(1.0 / np.maximum(np.sum((b - a) ** 2, axis=1), 1e-30))
-        self._R, self._e, self._core = f32(R), f32(e), f32(c)
-        self._group = mi.UInt32(grp.astype(np.uint32))
+        self._records = pack_records(a, b, R, c, e, grp, reach_R, seg, noise_K, Dmin, Ld)
         self._glo_box = ([opaque_float(v) for v in self.grid_lo],
                          [opaque_float(v) for v in self.grid_lo + cell * res])
         self._threshold = opaque_float(self.threshold_np)
@@ -355,8 +351,8 @@ class SkeletalSet(Node):
     def nbytes(self):
         # Per stored cell: start, count, L, M, slope start, count [empty, near start, count, gap].
         per_cell = 24 + (16 if self._near is not None else 0)
-        near = (self.near_len + self.slope_len) * 4 + self.n * 4 * (2 if self._near is not None else 1)
-        return (64 + self.n * 12 * 4 + self.layout.stored_cells * per_cell + self.layout.nbytes()
+        near = (self.near_len + self.slope_len) * 4
+        return (64 + self.n * RECORD * 4 + self.layout.stored_cells * per_cell + self.layout.nbytes()
                 + self.list_len * 4 + near)
 
     # -- evaluation ---------------------------------------------------------------
@@ -370,23 +366,19 @@ class SkeletalSet(Node):
         cell, stored, brick = self.layout.lookup(p)
         return cell, stored, brick, inside
 
-    def _falloff(self, p, k, geometry=False, level=None, direction=None):
-        """``g(d~)`` of primitive ``k`` at ``p`` (a value in [0, 1]); with ``geometry``,
-        ``(g, rho, r, D)``: also ``rho = max(r - c, 0)``, the distance ``r`` to the
-        skeleton and the star radius ``D(p)`` (``D_max`` where the noise is skipped),
-        and with a ``direction`` ``u`` (noise-free sets) ``|grad r . u|`` after them.
-        ``level``: the star noise's footprint level (``None``: every octave)."""
-        a = mi.Point3f(dr.gather(mi.Float, self._ax, k), dr.gather(mi.Float, self._ay, k),
-                       dr.gather(mi.Float, self._az, k))
-        ba = mi.Vector3f(dr.gather(mi.Float, self._bax, k), dr.gather(mi.Float, self._bay, k),
-                         dr.gather(mi.Float, self._baz, k))
+    def _falloff(self, p, prim, geometry=False, level=None, direction=None):
+        """``g(d~)`` of the primitive ``prim`` (a :class:`.skeletal_records.Primitive`) at
+        ``p`` (a value in [0, 1]); with ``geometry``, ``(g, rho, r, D)``: also
+        ``rho = max(r - c, 0)``, the distance ``r`` to the skeleton and the star radius
+        ``D(p)`` (``D_max`` where the noise is skipped), and with a ``direction`` ``u``
+        (noise-free sets) ``|grad r . u|`` after them. ``level``: the star noise's
+        footprint level (``None``: every octave)."""
+        a, ba, R, core = prim.a, prim.ba, prim.R, prim.core
         pa = p - a
-        t = dr.clip(dr.dot(pa, ba) * dr.gather(mi.Float, self._inv_len2, k), 0.0, 1.0)
+        t = dr.clip(dr.dot(pa, ba) * prim.inv_len2, 0.0, 1.0)
         s = a + ba * t
         off = p - s
         r = dr.norm(off)
-        R = dr.gather(mi.Float, self._R, k)
-        core = dr.gather(mi.Float, self._core, k)
         rho = dr.maximum(r - core, 0.0)
         if not self.noise:
             g = g_dr(dr.square(rho / R))
@@ -396,19 +388,19 @@ class SkeletalSet(Node):
                 return g, rho, r, R
             return g, rho, r, R, dr.abs(dr.dot(off, direction)) * dr.rcp(dr.maximum(r, 1e-30))
 
-        def noisy(rho, R, core, s, off, r, k, *lvl):
+        def noisy(rho, R, core, s, off, r, group, *lvl):
             u = off / dr.maximum(r, 1e-12)
             v = s + (core + R) * u
-            seed = self._seed + dr.gather(mi.UInt32, self._group, k) * 7919
+            seed = self._seed + group * 7919
             n = fbm(v * self._inv_wl, int(self.noise["octaves"]), self._lac, self._gain, seed, *lvl)
             D = R * (1.0 + self._amp * n)
             return g_dr(dr.square(rho / D)), D
 
-        def far(rho, R, core, s, off, r, k, *lvl):
+        def far(rho, R, core, s, off, r, group, *lvl):
             return mi.Float(0.0), R * self._reach
 
         lvl = () if level is None else (level,)
-        g, D = dr.if_stmt((rho, R, core, s, off, r, k, *lvl), rho < R * self._reach, noisy, far,
+        g, D = dr.if_stmt((rho, R, core, s, off, r, prim.group, *lvl), rho < R * self._reach, noisy, far,
                           label="star_noise")
         return (g, rho, r, D) if geometry else g
 
@@ -438,22 +430,22 @@ class SkeletalSet(Node):
         count = dr.select(inside, dr.gather(mi.UInt32, count_a, cell, stored), 0)
         n_u = len(us) + len(slants)
 
-        def visit(k, ds):
-            """``(e, g, ds, slopes)`` of primitive ``k``."""
-            e = dr.gather(mi.Float, self._e, k)
+        def visit(prim, ds):
+            """``(e, g, ds, slopes)`` of the primitive ``prim``."""
+            e = prim.e
             if not n_u and not radii:
-                return e, self._falloff(p, k, level=level), ds, ()
-            geometry = self._falloff(p, k, True, level, along)
+                return e, self._falloff(p, prim, level=level), ds, ()
+            geometry = self._falloff(p, prim, True, level, along)
             out = []
             for u, d in zip(us, ds):
                 if carving:
-                    out.append(dr.maximum(d, core_bound(self, k, e, geometry, u)))
+                    out.append(dr.maximum(d, core_bound(self, prim, geometry, u)))
                     continue
-                acts, bound = level_bound(self, k, e, geometry, u, rate)
+                acts, bound = level_bound(self, prim, geometry, u, rate)
                 out.append(dr.select(acts, dr.minimum(d, bound), d))
             for (u0, slope, cap), d in zip(slants, ds[len(us):]):
-                out.append(dr.minimum(d, slanted_bound(self, k, e, geometry, u0, slope, cap, rate)))
-            slopes = tuple(local_slope(self, k, e, geometry, rad, rate) for rad in radii)
+                out.append(dr.minimum(d, slanted_bound(self, prim, geometry, u0, slope, cap, rate)))
+            slopes = tuple(local_slope(self, prim, geometry, rad, rate) for rad in radii)
             return e, geometry[0], tuple(out), slopes
 
         carving = self.value_max <= 0
@@ -461,8 +453,8 @@ class SkeletalSet(Node):
         zeros = tuple(mi.Float(0.0) for _ in radii)
         if self.combine == "max" or not self.grouped:
             def body(i, acc, *rest):
-                k = dr.gather(mi.UInt32, index_a, start + i)
-                e, gk, ds, sl = visit(k, rest[:n_u])
+                prim = gather_primitive(self._records, dr.gather(mi.UInt32, index_a, start + i))
+                e, gk, ds, sl = visit(prim, rest[:n_u])
                 v = e * gk
                 # Union (max): one primitive at a time sets the slope; sum: they add.
                 join = dr.maximum if self.combine == "max" else (lambda a, b: a + b)
@@ -474,9 +466,9 @@ class SkeletalSet(Node):
             return acc, rest[:n_u], rest[n_u:]
 
         def body_g(i, acc, cur_g, best, cur_e, *rest):
-            k = dr.gather(mi.UInt32, index_a, start + i)
-            grp = dr.gather(mi.UInt32, self._group, k)
-            e, gk, ds, sl = visit(k, rest[:n_u])
+            prim = gather_primitive(self._records, dr.gather(mi.UInt32, index_a, start + i))
+            grp = prim.group
+            e, gk, ds, sl = visit(prim, rest[:n_u])
             new = grp != cur_g
             acc = acc + dr.select(new, cur_e * best, 0.0)
             best = dr.select(new, gk, dr.maximum(best, gk))
