@@ -104,6 +104,11 @@ def value_min(node: Node):
     return None if v is None else float(v)
 
 
+def _listed(radius, radii) -> bool:
+    """Whether ``radius`` is a plain number among ``radii`` (per-lane radii never are)."""
+    return isinstance(radius, float) and radius in radii
+
+
 class Sum(Node):
     """The paper's blend ``f = sum_i f_i`` (see module docstring)."""
 
@@ -162,7 +167,13 @@ class Sum(Node):
             plans.append(plan)
         for j in {j for plan in plans if plan for j in plan}:
             asks[j] = (asks[j] or []) + [-caps[j]]
-        radii = (self.slope_radii if levels else ()) + asked
+        # A radius asked that the sum uses itself is computed once (a blend over the sum
+        # asks for the sum's own radii).
+        own_radii = self.slope_radii if levels else ()
+        radii = own_radii + tuple(r for r in asked if not _listed(r, own_radii))
+        asked_at = [own_radii.index(r) if _listed(r, own_radii) else None for r in asked]
+        extra = iter(range(len(own_radii), len(radii)))
+        asked_at = [next(extra) if j is None else j for j in asked_at]
         steep = self._steep_child() if levels else None
         order = [i for i in range(len(kids)) if i != steep] + ([] if steep is None else [steep])
         values, answers, parts, slanted = [None] * len(kids), [None] * len(kids), [None] * len(kids), ()
@@ -208,13 +219,13 @@ class Sum(Node):
             grow = 1.0 + self.lod_kappa * footprint.rate
             L, L_glob = L * grow, L_glob * grow
         hart = local_hart(f, levels, L, r, L_glob)
-        own = len(radii) - len(asked)
+        own = len(own_radii)
         for S, rad in zip((slopes or ())[:own], radii[:own]):
             # Hart's bound in the ball of radius rad, where the slope is at most S.
             hart = tuple(dr.maximum(h, dr.minimum(dr.maximum(-f - c, 0.0) * dr.rcp(dr.maximum(S, 1e-12)), rad))
                          for h, c in zip(hart, levels))
         out = tuple(h if d is None else dr.maximum(d, h) for d, h in zip(ds, hart))
-        return f, out, tuple((slopes or ())[own:])
+        return f, out, tuple(slopes[j] for j in asked_at) if asked else ()
 
     def _slanted_asks(self, steep, values, parts, levels, radii, footprint):
         """``(c + f_o(p), S, reach)`` for each level ``c``: what the steep operand is asked
