@@ -28,6 +28,18 @@ inside the window for ``R_w / |u_xy|`` and above ``M_w`` for ``(z - M_w) / |u_z|
 so the smaller of the two is free (the per-level form of maximum-mipmap
 traversal, two-sided so that over-relaxed steps can be checked).
 
+Local slopes (:meth:`Heightfield.eval_local`). In a cell the bilinear slope along x is
+a convex combination of its two rows' slopes (likewise y), so ``|grad h| <= S_cell =
+hypot(max_rows |dH_x| / dx, max_cols |dH_y| / dy)``; a ball of radius at most
+``min(dx, dy)`` (:attr:`Heightfield.local_radius`) around a point of cell ``k`` lies in
+the cells next to ``k`` (clamped lookups outside the grid repeat its edge cells), so
+there ``|grad (h - z)| <= sqrt(1 + S_near^2)``, ``S_near`` the largest ``S_cell`` of the
+3 x 3 cells around ``k``, and along a line of unit direction ``u`` its derivative is at
+most ``S_near |u_xy| + |u_z|``. The box's distance is 1-Lipschitz, so ``f = min(h - z,
+b)`` has slope at most the larger of the two. A difference that subtracts the
+heightfield bounds the distance to its complement with them (a floating island's
+underside: 3.35, the DEM's steepest cell, where the cells around are nearly flat).
+
 References
 ----------
 Paris, A., Galin, E., Peytavie, A., Guérin, E., Gain, J. (2019). Terrain
@@ -122,6 +134,13 @@ class Heightfield(Node):
         self._maxima, self._maxima_width = pack_columns([_window_max(H, w) for w in self.windows])
         self._radii = [opaque_float(w * min(self.dx, self.dy)) for w in self.windows]
         self._inv_L = opaque_float(1.0 / np.sqrt(1.0 + self.slope_bound ** 2))
+        # Local slopes (module docstring): S_near of each cell, at its sample index.
+        cell_sx = np.maximum(np.abs(np.diff(H[:-1], axis=1)), np.abs(np.diff(H[1:], axis=1))) / self.dx
+        cell_sy = np.maximum(np.abs(np.diff(H[:, :-1], axis=0)), np.abs(np.diff(H[:, 1:], axis=0))) / self.dy
+        near = np.zeros_like(H)
+        near[:-1, :-1] = window_max(np.hypot(cell_sx, cell_sy), 3)
+        self._near_slope = mi.Float(near.ravel().astype(np.float32) * np.float32(1.0 + 1e-6))
+        self.local_radius = min(self.dx, self.dy)
         # Each cell's four corner samples side by side: a lookup is one packet gather
         # of 16 bytes instead of four scalar gathers (the heights, 4x).
         corners = (H[:-1, :-1], H[:-1, 1:], H[1:, :-1], H[1:, 1:])
@@ -163,13 +182,32 @@ class Heightfield(Node):
                         dr.abs(p.z - self._bc[2]) - self._bh[2])
         return -(dr.norm(dr.maximum(q, 0.0)) + dr.minimum(dr.maximum(dr.maximum(q.x, q.y), q.z), 0.0))
 
+    def _sample_index(self, p):
+        """The sample index ``j nx + i`` of the cell under ``p`` (clamped at the edges)."""
+        u = clip_index((p.x - self._x0) * self._inv_dx, 0.0, self.nx - 1.0)
+        v = clip_index((p.y - self._y0) * self._inv_dy, 0.0, self.ny - 1.0)
+        return dr.minimum(mi.UInt32(v), self.ny - 2) * self.nx + dr.minimum(mi.UInt32(u), self.nx - 2)
+
+    def eval_local(self, p, levels, direction=None, footprint=None, radii=()):
+        """``(f, ds, slopes)``: :meth:`eval_bounds` and, for each radius of ``radii``, a
+        bound of ``|grad f|`` in the ball of that radius around ``p`` (along the line of
+        ``direction`` where one is given): module docstring, "Local slopes"."""
+        f, ds = self.eval_bounds(p, levels, direction, footprint)
+        if not radii:
+            return f, ds, ()
+        S = dr.gather(mi.Float, self._near_slope, self._sample_index(p))
+        if direction is None:
+            near = dr.sqrt(1.0 + S * S)
+        else:
+            run = dr.sqrt(dr.square(direction.x) + dr.square(direction.y))
+            near = dr.maximum(S * run + dr.abs(direction.z), 1.0) * (1.0 + 1e-6)
+        return f, ds, tuple(dr.select(rad <= self.local_radius, near, self.lipschitz) for rad in radii)
+
     def eval_bounds(self, p, levels, direction=None, footprint=None):
         # An intersection of the ground and the box: as far as the farther one.
         box = self._box(p)
         top = self.height(p.x, p.y) - p.z
-        u = clip_index((p.x - self._x0) * self._inv_dx, 0.0, self.nx - 1.0)
-        v = clip_index((p.y - self._y0) * self._inv_dy, 0.0, self.ny - 1.0)
-        k = dr.minimum(mi.UInt32(v), self.ny - 2) * self.nx + dr.minimum(mi.UInt32(u), self.nx - 2)
+        k = self._sample_index(p)
         above = [p.z - m for m in self.window_maxima(k)]
         if direction is not None:
             inv_run = dr.rcp(dr.maximum(dr.sqrt(dr.square(direction.x) + dr.square(direction.y)), 1e-7))

@@ -186,10 +186,20 @@ class Difference(_NAry):
         # their true value, which a culled subtree's far answer is not.
         f, ds = self.children[0].eval_bounds(p, levels, direction, footprint)
         for c in self.children[1:]:
-            fc = c.eval(p)
+            rad = getattr(c, "local_radius", None) if levels else None
+            if rad is None:
+                fc = c.eval(p)
+            else:
+                # Hart's bound in the ball (or on the line) where the operand's slope is
+                # at most S: its complement {c <= lv} is that far, or the ball's radius.
+                fc, _, (S,) = c.eval_local(p, (), direction, None, (rad,))
             f = dr.minimum(f, -fc)
             inv = 1.0 / c.lipschitz
             ds = tuple(dr.maximum(d, dr.maximum(fc - lv, 0.0) * inv) for d, lv in zip(ds, levels))
+            if rad is not None:
+                local = dr.rcp(dr.maximum(S, 1e-12))
+                ds = tuple(dr.maximum(d, dr.minimum(dr.maximum(fc - lv, 0.0) * local, rad))
+                           for d, lv in zip(ds, levels))
         return f, ds
 
     def bounds(self):
