@@ -100,6 +100,44 @@ def height_grid(heights, extent):
     return H, (x0, y0, x1, y1)
 
 
+def line_factors(direction):
+    """``(1 / |u_xy|, 1 / |u_z|)`` of a unit direction ``u`` (each at most 1e7), or ``None``
+    without one: what :func:`window_reach` needs on a ray's line."""
+    if direction is None:
+        return None
+    return (dr.rcp(dr.maximum(dr.sqrt(dr.square(direction.x) + dr.square(direction.y)), 1e-7)),
+            dr.rcp(dr.maximum(dr.abs(direction.z), 1e-7)))
+
+
+def window_reach(free, clearances, radii, line=None):
+    """The free length ``free`` grown by window clearances (module docstring, "Local
+    distance bound"): ``max(free, max_w min(R_w, C_w))`` for a ball, ``max(free, max_w
+    min(R_w / |u_xy|, C_w / |u_z|))`` on a line (``line``: :func:`line_factors`).
+
+    Parameters
+    ----------
+    free : mi.Float
+        A free length already proven.
+    clearances : sequence of mi.Float
+        ``C_w``: how far above everything in window ``w`` the point is (less the level).
+    radii : sequence
+        ``R_w``: the horizontal radius each window holds around the point.
+    line : (mi.Float, mi.Float), optional
+        ``(1 / |u_xy|, 1 / |u_z|)`` of the ray's direction; None for a ball.
+
+    Returns
+    -------
+    mi.Float
+    """
+    for clearance, radius in zip(clearances, radii):
+        if line is None:
+            reach = dr.minimum(radius, clearance)
+        else:
+            reach = dr.minimum(radius * line[0], clearance * line[1])
+        free = dr.maximum(free, reach)
+    return free
+
+
 class Heightfield(Node):
     """Ground under a bilinear elevation grid (see module docstring).
 
@@ -209,19 +247,11 @@ class Heightfield(Node):
         top = self.height(p.x, p.y) - p.z
         k = self._sample_index(p)
         above = [p.z - m for m in self.window_maxima(k)]
-        if direction is not None:
-            inv_run = dr.rcp(dr.maximum(dr.sqrt(dr.square(direction.x) + dr.square(direction.y)), 1e-7))
-            inv_drop = dr.rcp(dr.maximum(dr.abs(direction.z), 1e-7))
+        line = line_factors(direction)
         ds = []
         for c in levels:
             d = dr.maximum(dr.maximum(-top - c, 0.0) * self._inv_L, dr.maximum(-box - c, 0.0))
-            for clearance, radius in zip(above, self._radii):
-                if direction is None:
-                    reach = dr.minimum(radius, clearance - c)
-                else:
-                    reach = dr.minimum(radius * inv_run, (clearance - c) * inv_drop)
-                d = dr.maximum(d, reach)
-            ds.append(d)
+            ds.append(window_reach(d, [a - c for a in above], self._radii, line))
         return dr.minimum(top, box), tuple(ds)
 
     def height_range(self, xlo, xhi, ylo, yhi):

@@ -41,7 +41,9 @@ a box ``B`` around the point. Every point ``q`` of ``B`` shrunk by ``sigma`` has
 cube in ``B``, so ``F(q) = -sigma``: the distance to ``{F >= -c}`` is at least the
 distance from ``p`` to the faces of ``B`` minus ``sigma`` (ball), or along a ray of
 direction ``u``, ``min_a (dist to the faces of B along axis a - sigma) / |u_a|`` on
-both sides. The tracer takes the larger of that and Hart's ``-F / sqrt(3)``.
+both sides. Low over the ground, where the coarse cells end, the window maxima of the
+columns' tops (:mod:`.column_tops`) prove longer lengths. The tracer takes the largest
+of these and Hart's ``-F / sqrt(3)``.
 
 References
 ----------
@@ -61,8 +63,10 @@ import numpy as np
 from numba import njit
 
 from arches_render.backend import variant
+from arches_render.field.heightfield import line_factors
 from arches_render.field.node import Node, box_distance, cell_index, clip_index, hart_bounds, opaque_float
 
+from .column_tops import ColumnTops
 from .material_stacks import SOLID, MaterialStacks
 
 SQRT3 = math.sqrt(3.0)
@@ -263,6 +267,7 @@ class ConvolutionSurface(Node):
         else:
             self._box = (np.array([x0, y0, z0]), np.array([x0, y0, z0]))
         self._coarse = _CoarseDistance(self.sums.np, stacks, sigma)
+        self._tops = ColumnTops(off, top, stacks, sigma)
         self._bounds_op = tuple([opaque_float(v) for v in b] for b in self.bounds())
 
     @property
@@ -310,8 +315,10 @@ class ConvolutionSurface(Node):
         # in the point's cube, so the point lies in the empty box of the coarse grid's
         # distance transform or in bounds() (matter's box grown by sigma), whose
         # distance holds outside the grid, where the clamped cells say nothing.
-        free = dr.maximum(self._coarse.free_distance(p, S, direction) - self._sigma,
+        free = dr.maximum(self._coarse.free_distance(p, S, self._sigma, direction),
                           box_distance(p, *self._bounds_op))
+        # Low over the ground the coarse cells end: the columns' tops reach further.
+        free = dr.maximum(free, self._tops.free_length(p, line_factors(direction)))
         ds = tuple(dr.maximum(h, dr.select(self._sigma > c + self.tilt_shift, dr.maximum(free, 0.0), 0.0))
                    for h, c in zip(hart, levels))
         return f, ds
@@ -329,7 +336,7 @@ class ConvolutionSurface(Node):
         return 2.0 * self.K * self.K
 
     def nbytes(self):
-        return 64 + self.sums.nbytes + self._coarse.nbytes
+        return 64 + self.sums.nbytes + self._coarse.nbytes + self._tops.nbytes
 
     def __repr__(self):
         return f"ConvolutionSurface({self.stacks!r}, sigma={self.sigma:g})"
@@ -453,14 +460,18 @@ class _CoarseDistance:
             & (rel[2] >= 0.0) & (rel[2] <= 1.0)
         return dr.select(inside, code, 0.0), (S, rel)
 
-    def free_distance(self, p, S_rel, direction=None):
-        """Distance from ``p`` to the faces of its empty box ``B`` (ball, or along a line)."""
+    def free_distance(self, p, S_rel, shrink, direction=None):
+        """Distance from ``p`` to the faces of its empty box ``B`` shrunk by ``shrink`` on
+        every side (ball, or along a line; negative outside the shrunk box)."""
         S, rel = S_rel
         reach = dr.maximum(S, 0.0) - 1.0
         d = None
         for a in range(3):
-            # Distance (cells) to the faces of B = [i - (D - 1), i + D) along axis a.
-            side = dr.minimum(rel[a] + reach, reach + 1.0 - rel[a]) * self._c
+            # Distance to the faces of B = [i - (D - 1), i + D) cells along axis a, less
+            # the shrink before the line's slope divides it: a line nearly parallel to a
+            # face may stay within the shrink of it all along (the shrink taken after
+            # the division granted 0.16 m to a point whose cube held matter).
+            side = dr.minimum(rel[a] + reach, reach + 1.0 - rel[a]) * self._c - shrink
             if direction is not None:
                 side = side * dr.rcp(dr.maximum(dr.abs(direction[a]), 1e-7))
             d = side if d is None else dr.minimum(d, side)

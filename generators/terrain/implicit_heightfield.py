@@ -95,7 +95,7 @@ import numpy as np
 
 from arches_render.backend import variant
 from arches_render.field import Heightfield
-from arches_render.field.heightfield import height_grid
+from arches_render.field.heightfield import height_grid, line_factors, window_reach
 from arches_render.field.lod import OctaveLOD
 from arches_render.field.node import box_distance, box_gap, box_reach, clip_index, one_sided_lanes, opaque_float
 from arches_render.field.noise import fbm, fbm_gradient, fbm_lipschitz, fbm_range
@@ -309,9 +309,7 @@ class ImplicitHeightfield(Heightfield):
         w = clip_index((p.y - self._y0) * self._inv_dy, 0.0, self.ny - 1.0)
         k = dr.minimum(mi.UInt32(w), self.ny - 2) * self.nx + dr.minimum(mi.UInt32(u), self.nx - 2)
         above = [p.z - m - self._extra for m in self.window_maxima(k)]
-        if direction is not None:
-            inv_run = dr.rcp(dr.maximum(dr.sqrt(dr.square(direction.x) + dr.square(direction.y)), 1e-7))
-            inv_drop = dr.rcp(dr.maximum(dr.abs(direction.z), 1e-7))
+        line = line_factors(direction)
         # f_T >= -c  =>  v >= -c / k (0 <= c < T); nothing to bound when c >= T.
         # Below the surface (c < 0, asked by the sum's caps) s(v) >= -c > 0 only
         # gives v >= -c / S_SIGMA.
@@ -332,12 +330,7 @@ class ImplicitHeightfield(Heightfield):
             dT = dr.maximum(-v - shift, 0.0) * self._inv_Lh * (1.0 / grow)
             if direction is not None:
                 dT = dr.maximum(dT, lines[i])
-            for clearance, radius in zip(above, self._radii):
-                if direction is None:
-                    reach = dr.minimum(radius, clearance - shift)
-                else:
-                    reach = dr.minimum(radius * inv_run, (clearance - shift) * inv_drop)
-                dT = dr.maximum(dT, reach)
+            dT = window_reach(dT, [a - shift for a in above], self._radii, line)
             wc = dr.clip((1.0 - c / self._T) * 0.5, 0.0, 1.0)
             rc = self._R * dr.sqrt(dr.maximum(1.0 - dr.cbrt(wc), 0.0))
             d = dr.maximum(dT, dr.maximum(dP - rc, 0.0))
