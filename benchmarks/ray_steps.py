@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import os
 import sys
+from dataclasses import dataclass
 
 import drjit as dr
 import mitsuba as mi
@@ -75,7 +76,8 @@ def aim_at_sun(desc, tracer):
 
 
 def ray_steps(desc, tracer, width=320, height=180, seed=1):
-    """Steps per ray of the camera, shadow and bounce rays of one view.
+    """Steps per ray of the camera, shadow and bounce rays of one view (those of
+    :func:`traced_rays`).
 
     Parameters
     ----------
@@ -95,6 +97,34 @@ def ray_steps(desc, tracer, width=320, height=180, seed=1):
         and the shadow rays split into ``shadow_free`` and ``shadow_blocked``;
         ``packet``: the mean over packets of 16 consecutive lanes of their largest count.
     """
+    rays = traced_rays(desc, tracer, width, height, seed)
+    out = {"camera": _stats(rays["camera"].result, rays["camera"].lanes)}
+    shadow = rays["shadow"]
+    blocked = np.broadcast_to(shadow.result.hit.numpy(), shadow.lanes.shape)
+    out["shadow"] = _stats(shadow.result, shadow.lanes)
+    # Rays that reach the sky and rays stopped by rock cost differently (goblins: 49 and
+    # 61 steps): a structure that ends free rays early does nothing for blocked ones.
+    out["shadow_free"] = _stats(shadow.result, shadow.lanes & ~blocked)
+    out["shadow_blocked"] = _stats(shadow.result, shadow.lanes & blocked)
+    out["bounce"] = _stats(rays["bounce"].result, rays["bounce"].lanes)
+    return out
+
+
+@dataclass
+class TracedRays:
+    """One kind of ray of :func:`traced_rays`: origins, unit directions and cones
+    ``(r0, spread)`` per lane, the query's result, and the lanes cast (numpy bools)."""
+
+    origin: object
+    direction: object
+    cone: tuple
+    result: object
+    lanes: np.ndarray
+
+
+def traced_rays(desc, tracer, width=320, height=180, seed=1):
+    """The camera, shadow and bounce rays of one view, traced as :func:`ray_steps`
+    describes: ``{kind: TracedRays}``."""
     from bench_tracing import camera_rays
     cam = desc.camera
     o, d, rate = camera_rays(cam.origin, cam.target, cam.fov, width, height)
@@ -103,7 +133,7 @@ def ray_steps(desc, tracer, width=320, height=180, seed=1):
     first = tracer.query(o, d, mi.Float(dr.inf), mi.Bool(True), cone)
     dr.eval(first.hit, first.t, first.steps)
     hit = first.hit.numpy()
-    out = {"camera": _stats(first, np.ones_like(hit))}
+    out = {"camera": TracedRays(o, d, cone, first, np.ones_like(hit))}
     p, n = tracer.surface(o + d * first.t, first.t, d, cone)
     # The integrator's lift off the surface.
     from arches_render.render import integrator  # noqa: F401  (same variant, plugins)
@@ -118,20 +148,15 @@ def ray_steps(desc, tracer, width=320, height=180, seed=1):
     lit = first.hit & (dr.dot(n, sun) > 0.0) & (dr.dot(n, -d) > 0.0)
     shadow = tracer.query(origin, sun, mi.Float(dr.inf), lit, hit_cone, any_hit=True)
     dr.eval(shadow.steps, shadow.hit)
-    lit_np, blocked = lit.numpy(), np.broadcast_to(shadow.hit.numpy(), (len(hit),))
-    out["shadow"] = _stats(shadow, lit_np)
-    # Rays that reach the sky and rays stopped by rock cost differently (goblins: 49 and
-    # 61 steps): a structure that ends free rays early does nothing for blocked ones.
-    out["shadow_free"] = _stats(shadow, lit_np & ~blocked)
-    out["shadow_blocked"] = _stats(shadow, lit_np & blocked)
+    out["shadow"] = TracedRays(origin, sun, hit_cone, shadow, lit.numpy())
     u1, u2 = rng.random(len(hit)).astype(np.float32), rng.random(len(hit)).astype(np.float32)
     local = mi.Vector3f(mi.Float(np.sqrt(u1) * np.cos(2 * np.pi * u2)),
                         mi.Float(np.sqrt(u1) * np.sin(2 * np.pi * u2)), mi.Float(np.sqrt(1 - u1)))
     bounce_dir = mi.Frame3f(n).to_world(local)
-    bounce = tracer.query(origin, bounce_dir, mi.Float(dr.inf), first.hit,
-                          (hit_cone[0], hit_cone[1] + BOUNCE_SPREAD))
+    bounce_cone = (hit_cone[0], hit_cone[1] + BOUNCE_SPREAD)
+    bounce = tracer.query(origin, bounce_dir, mi.Float(dr.inf), first.hit, bounce_cone)
     dr.eval(bounce.steps)
-    out["bounce"] = _stats(bounce, hit)
+    out["bounce"] = TracedRays(origin, bounce_dir, bounce_cone, bounce, hit)
     return out
 
 
