@@ -45,8 +45,7 @@ def lane(value, i):
 def walk(tracer, o, d, cone, any_hit, max_steps=2000):
     """Step one ray with the tracer's own step: rows ``(t, f, r)`` of every step."""
     from arches_render.render.march import March, ShadowProbe, ray_box
-    _, t_out = ray_box(o, d, tracer.lo_op, tracer.hi_op)
-    t_in = ray_box(o, d, tracer.lo_op, tracer.hi_op)[0]
+    t_in, t_out = ray_box(o, d, tracer.lo_op, tracer.hi_op)
     march = March.start(dr.maximum(t_in, 0.0), tracer.omega)
     probe = ShadowProbe.start(1) if any_hit else None
     rows = []

@@ -192,7 +192,7 @@ class Difference(_NAry):
             else:
                 # Hart's bound in the ball (or on the line) where the operand's slope is
                 # at most S: its complement {c <= lv} is that far, or the ball's radius.
-                fc, _, (S,) = c.eval_local(p, (), direction, None, (rad,))
+                fc, _, (S,) = eval_local(c, p, (), direction, None, (rad,))
             f = dr.minimum(f, -fc)
             inv = 1.0 / c.lipschitz
             ds = tuple(dr.maximum(d, dr.maximum(fc - lv, 0.0) * inv) for d, lv in zip(ds, levels))
