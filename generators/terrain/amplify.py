@@ -7,6 +7,9 @@ The pipeline of Paris et al. (2019, Fig. 2 and 12) for one *preset*
    (:func:`.preset_choice.choose_preset`); landform sizes come from its relief in
    metres (:func:`.preset_choice.landform_scales`); the sea and the lakes from its
    elevations (:mod:`.water`); the sub-cell detail from its spectrum (:mod:`.detail`).
+   Heights quantized on a lattice whose terraces show (whole metres on gentle
+   slopes) are first smoothed within half a step
+   (:mod:`arches_render.field.dequantize`).
 1. Implicitization: the DEM becomes an ``implicit_heightfield`` (prism and
    sigmoid falloff, section 5.1) with fBm octaves continuing its spectrum down to
    the precision. Falloff ``R = min(4 cells, 2 F)`` (``F`` the landform size; less
@@ -34,6 +37,8 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from arches_render.field.dequantize import dequantize, quantization_step
 
 from .detail import default_precision, detail_amplification
 from .preset_choice import choose_preset, landform_scales
@@ -164,12 +169,18 @@ def amplify(heights, cell_size, preset, seed, work_dir, prefix="amplified", prog
         raise ValueError(f"unknown amplify option(s): {', '.join(sorted(options))}")
     rng = np.random.default_rng(seed)
     H = np.asarray(heights, dtype=np.float32).astype(np.float64)
+    notes = []
+    step = quantization_step(H)
+    if step is not None:
+        # Whole-metre DEMs are staircases where the ground rises less than a step a cell.
+        H = dequantize(H, step, sea_level)
+        notes.append(f"heights on a {step:g} m lattice: terraces smoothed away, each height moved by at "
+                     f"most {0.5 * step:g} m")
     ny, nx = H.shape
     cell = float(cell_size)
     W, D = (nx - 1) * cell, (ny - 1) * cell
     extent = (-W / 2, -D / 2, W / 2, D / 2)  # centred: float32 keeps its precision at the corners
     precision = float(precision) if precision else default_precision(cell)
-    notes = []
     level = 0.0 if sea_level is None else float(sea_level)
     if preset == "auto":
         preset, reason, _ = choose_preset(H, cell, level)

@@ -26,6 +26,9 @@ default 8192^2: the reduction is printed and written in the scene's header; at 8
 the implicit heightfield alone holds 1.3 GB, heights and maximum mipmaps, 2.6 GB peak),
 ``--data-dir`` (relative to the scene's folder), ``-q``.
 
+Heights quantized on a lattice whose terraces show (whole metres on gentle slopes, an
+8-bit image) are smoothed within half a step first, and the header says so
+(:mod:`arches_render.field.dequantize`).
 A preset that finds nothing to carve (no coastal cliff, no tunnel, a flat DEM) says so
 in one line, printed and written in the scene's header, and with ``auto`` the next
 applicable preset runs instead (:mod:`.fallback`); the scene is written in any case.
