@@ -66,3 +66,40 @@ def test_the_coast_stays_where_it_is():
     assert np.array_equal(Z <= 0.0, wet)
     assert np.array_equal(Z.astype(np.float32) <= 0.0, wet)
     assert np.all(np.abs(Z - Q) <= 0.5 + 1e-12)
+
+
+def test_a_heightfield_node_smooths_its_file_when_asked(tmp_path):
+    """``dequantize = true`` on a heightfield node reading whole metres: its heights are
+    within half a metre of the file's and lose their terraces; without the key the file's
+    heights are kept; a value that is not a boolean names the key."""
+    import pytest
+    from helpers import variant
+    variant()
+    from arches_render.scene import SceneError, load_scene
+    Q = np.round(_relief(96))
+    np.save(tmp_path / "dem.npy", Q.astype(np.float32))
+    scene = """[camera]
+origin = [475.0, -400.0, 300.0]
+target = [475.0, 475.0, 50.0]
+[[lights]]
+type = "sunsky"
+elevation = 30.0
+azimuth = 120.0
+[field]
+root = "ground"
+[nodes.ground]
+type = "heightfield"
+extent = [0.0, 0.0, 950.0, 950.0]
+source = "file"
+file = "dem.npy"
+"""
+    heights = {}
+    for key, line in (("kept", ""), ("smoothed", "dequantize = true\n")):
+        (tmp_path / f"{key}.toml").write_text(scene + line)
+        heights[key] = np.asarray(load_scene(tmp_path / f"{key}.toml").field.heights_np, dtype=np.float64)
+    assert np.array_equal(heights["kept"], Q)
+    assert np.abs(heights["smoothed"] - Q).max() <= 0.5 + 1e-6
+    assert _equal_neighbours(heights["smoothed"], 1.0) < 0.1 < _equal_neighbours(Q, 1.0)
+    (tmp_path / "bad.toml").write_text(scene + "dequantize = 1\n")
+    with pytest.raises(SceneError, match="dequantize"):
+        load_scene(tmp_path / "bad.toml")

@@ -15,7 +15,10 @@ heightfield            extent = [x0, y0, x1, y1], [base], [source = "fbm" | "fil
                        fbm: [resolution = [256, 256]], amplitude, wavelength, octaves,
                        lacunarity, gain, seed, [ridged], [power = 1], [offset = 0],
                        [edge_falloff = 0]; file: file (.npy, 16-bit .png, .tif),
-                       [height_scale = 1], [height_offset = 0]
+                       [height_scale = 1], [height_offset = 0], [dequantize = false]
+                       (heights on a visible lattice, whole metres on gentle slopes or an
+                       8-bit image, smoothed within half a step:
+                       :mod:`arches_render.field.dequantize`; amplify always does it)
 union, intersection    children (>= 1)
 difference             children (>= 2): the first minus the others
 blend                  children, radius > 0 (smooth union)
@@ -71,16 +74,24 @@ def fbm_args(t: Table, amplitude=1.0, wavelength=1.0, octaves=4):
 
 
 def load_heights(t: Table, base_dir: Path) -> np.ndarray:
-    """Heights (metres) of the table's ``file``, scaled by ``height_scale`` and offset.
+    """Heights (metres) of the table's ``file``, scaled by ``height_scale`` and offset, and
+    with ``dequantize`` smoothed within half their lattice's step where it shows.
 
     One DEM reader for scenes and ``amplify`` (:func:`arches_render.field.heightmaps.read_dem`:
-    formats, no-data filling, size limits).
+    formats, no-data filling, size limits). Not smoothed by default: it costs a second
+    or more a million samples at every load, and a scene's heights are what its file says.
     """
     try:
         H = read_dem(scene_file(t, "file", base_dir=base_dir, what="DEM"), max_samples=8192 * 8192).heights
     except DEMError as exc:
         raise t.error("file", str(exc)) from None
-    return H * t.number("height_scale", 1.0) + t.number("height_offset", 0.0)
+    H = H * t.number("height_scale", 1.0) + t.number("height_offset", 0.0)
+    if t.boolean("dequantize", False):
+        from ..field.dequantize import dequantize, quantization_step
+        step = quantization_step(H)
+        if step is not None:
+            H = dequantize(H, step)
+    return H
 
 
 def heightfield_node(t: Table, ctx):
