@@ -250,28 +250,85 @@ def test_presence_follows_distance_range_and_slope(tiles, amplified):
     assert np.all(F.evaluate(blocks, top) < 0)
     # Every present copy has a majority of anchors in the distance range.
     tile = blocks.tile
-    idx = np.argwhere(blocks.presence_np)
-    T = idx[:, :3] + blocks.tiles_lo
-    anchors = tile.anchors[idx[:, 3]] + (T * tile.size)[:, None, :]
+    T, b = blocks.presence.cells, blocks.presence.blocks
+    anchors = tile.anchors[b] + (T * tile.size)[:, None, :]
     f = F.evaluate(host, anchors.reshape(-1, 3)).reshape(anchors.shape[:2])
     assert np.all(((f >= -1.0) & (f <= 1.0)).sum(1) > anchors.shape[1] / 2)
     # A narrower range keeps a subset; no slope test keeps a superset.
-    narrow, _ = presence_table(tile, host, [-8, -7, 0], [3, 7, 7], (-0.3, 0.3), 50.0)
-    flat, _ = presence_table(tile, host, [-8, -7, 0], [3, 7, 7], (-1.0, 1.0), 0.0)
-    assert np.all(blocks.presence_np >= narrow) and narrow.sum() < blocks.presence_np.sum()
-    assert np.all(flat >= blocks.presence_np) and flat.sum() > blocks.presence_np.sum()
+    narrow = presence_table(tile, host, [-8, -7, 0], [3, 7, 7], (-0.3, 0.3), 50.0).dense()
+    flat = presence_table(tile, host, [-8, -7, 0], [3, 7, 7], (-1.0, 1.0), 0.0).dense()
+    kept = blocks.presence.dense()
+    assert np.all(kept >= narrow) and narrow.sum() < kept.sum()
+    assert np.all(flat >= kept) and flat.sum() > kept.sum()
+
+
+def test_presence_pruning_keeps_exactly_the_copies_a_full_test_keeps(tiles):
+    """The Lipschitz pruning of virtual cells (and the region test moved before the
+    anchors) drop only copies that fail anyway: the table equals a brute-force one
+    that tests every anchor of every block of every virtual cell."""
+    host, tile = _cliff(), tiles["equidimensional"]
+    lo, hi, rng = np.array([-8.0, -7, 0]), np.array([3.0, 7, 7]), (-0.6, 0.4)
+    got = presence_table(tile, host, lo, hi, rng, 0.0).dense()
+    s = tile.size
+    t_lo, t_hi = np.floor(lo / s).astype(int), np.floor(hi / s).astype(int)
+    T = np.stack(np.meshgrid(*[np.arange(t_lo[a], t_hi[a] + 1) for a in range(3)], indexing="ij"),
+                 -1).reshape(-1, 3)
+    A = tile.anchors[None].astype(np.float64) + s * T[:, None, None, :]
+    f = F.evaluate(host, A.reshape(-1, 3)).astype(np.float64).reshape(A.shape[:3])
+    ref = ((f >= rng[0]) & (f <= rng[1])).sum(-1) > A.shape[2] / 2
+    ref &= np.all((A[:, :, 0] >= lo) & (A[:, :, 0] <= hi), axis=-1)
+    ref = ref.reshape(*(t_hi - t_lo + 1), tile.n_blocks)
+    assert 0 < ref.sum() < ref.size / 4         # pruning had cells to drop
+    assert np.array_equal(got, ref)
+
+
+def test_fallen_blocks_rest_on_gentle_ground_and_thin_out_with_density(tiles):
+    """``max_slope`` keeps copies on ground a block can rest on (the cliff's flat top,
+    not its 73-degree wall nor the box's flat underside); ``density`` keeps each copy with the probability at its
+    centroid, by a draw of its own: a subset, about that share, nothing where it is 0,
+    the same copies for the same seed."""
+    host, tile = _cliff(), tiles["equidimensional"]
+    args = ([-8, -7, 0], [3, 7, 7], (-1.0, 1.0))
+    ground = presence_table(tile, host, *args, 0.0, max_slope=30.0)
+    everywhere = presence_table(tile, host, *args, 0.0)
+    c = tile.centroid[ground.blocks] + ground.cells * tile.size
+    assert len(c) > 20 and np.all(c[:, 2] > 4.0)     # on the top (z = 6), none down the wall
+    assert np.all(everywhere.dense() >= ground.dense()) and len(everywhere.blocks) > len(ground.blocks)
+    with pytest.raises(ValueError, match="min_slope <= max_slope"):
+        presence_table(tile, host, *args, 50.0, max_slope=30.0)
+
+    n = len(everywhere.blocks)
+    full = presence_table(tile, host, *args, 0.0, density=np.ones((4, 4)), seed=1)
+    assert np.array_equal(full.dense(), everywhere.dense())
+    half = presence_table(tile, host, *args, 0.0, density=np.full((4, 4), 0.3), seed=1)
+    k = len(half.blocks)
+    assert np.all(everywhere.dense() >= half.dense())
+    assert abs(k - 0.3 * n) < 4 * np.sqrt(n * 0.3 * 0.7), (k, n)
+    assert np.array_equal(half.dense(), presence_table(tile, host, *args, 0.0, density=np.full((4, 4), 0.3),
+                                                       seed=1).dense())
+    other = presence_table(tile, host, *args, 0.0, density=np.full((4, 4), 0.3), seed=2)
+    assert not np.array_equal(half.dense(), other.dense())
+    west = np.zeros((4, 4))
+    west[:, :2] = 1.0                               # x in [-8, -2.5): kept; east of it: none
+    side = presence_table(tile, host, *args, 0.0, density=west, seed=1)
+    cx = (tile.centroid[side.blocks] + side.cells * tile.size)[:, 0]
+    assert len(cx) > 5 and np.all(cx < -2.5)
+    for bad in (np.full((2, 2), 1.5), np.zeros(3)):
+        with pytest.raises(ValueError, match="density"):
+            presence_table(tile, host, *args, 0.0, density=bad)
 
 
 def test_presence_by_resistance(tiles):
     host, tile = _cliff(), tiles["prismatic"]
     args = ([-8, -7, 0], [3, 7, 7], (-1.0, 1.0), 50.0)
-    base, _ = presence_table(tile, host, *args)
-    hard, _ = presence_table(tile, host, *args, resistance=0.8, resistance_range=(0.5, 1.0))
-    soft, _ = presence_table(tile, host, *args, resistance=0.2, resistance_range=(0.5, 1.0))
+    base = presence_table(tile, host, *args).dense()
+    hard = presence_table(tile, host, *args, resistance=0.8, resistance_range=(0.5, 1.0)).dense()
+    soft = presence_table(tile, host, *args, resistance=0.2, resistance_range=(0.5, 1.0)).dense()
     assert np.array_equal(hard, base) and not soft.any()
     # A stratum node: resistance = z, blocks only between z = 2 and 4 (anchor majority).
     strata = F.Plane([0.0, 0.0, -1.0], [0.0, 0.0, 0.0])   # field = z
-    mid, t_lo = presence_table(tile, host, *args, resistance=strata, resistance_range=(2.0, 4.0))
+    table = presence_table(tile, host, *args, resistance=strata, resistance_range=(2.0, 4.0))
+    mid, t_lo = table.dense(), table.tiles_lo
     assert 0 < mid.sum() < base.sum()
     idx = np.argwhere(mid)
     z = (tile.centroid[idx[:, 3]] + (idx[:, :3] + t_lo) * tile.size)[:, 2]
@@ -361,6 +418,30 @@ def test_bad_blocks_keys_name_the_key(tmp_path, monkeypatch, edit, key):
     with pytest.raises(SceneError) as err:
         _load(MINI.replace(edit, key), tmp_path)
     assert "nodes.b." in str(err.value)
+
+
+def test_scene_density_and_max_slope_keys(tmp_path, monkeypatch):
+    """``density`` (an .npz grid over the region) and ``max_slope`` reach the presence
+    table; bad values name their key."""
+    from arches_render.npzfile import write_npz
+    from arches_render.scene import SceneError
+    monkeypatch.setenv("ARCHES_RENDER_CACHE", str(tmp_path / "cache"))
+    for name, grid in (("zero", np.zeros((3, 2))), ("one", np.ones((3, 2))), ("bad", np.full((3, 2), 1.5))):
+        with open(tmp_path / f"{name}.npz", "wb") as f:
+            write_npz(f, {"density": grid})
+    base = _load(MINI.replace("seed = 1", "seed = 1\nmin_slope = 0.0"), tmp_path).field.children[1]
+    ones = _load(MINI.replace("seed = 1", 'seed = 1\nmin_slope = 0.0\ndensity = "one.npz"'), tmp_path)
+    assert np.array_equal(ones.field.children[1].presence.dense(), base.presence.dense())
+    zero = _load(MINI.replace("seed = 1", 'seed = 1\nmin_slope = 0.0\ndensity = "zero.npz"'), tmp_path)
+    assert base.n_present > 0 and zero.field.children[1].n_present == 0
+    # The host box's top faces up (flat); its side walls do not: max_slope 30 keeps fewer.
+    flat = _load(MINI.replace("seed = 1", "seed = 1\nmin_slope = 0.0\nmax_slope = 30.0"), tmp_path)
+    assert 0 < flat.field.children[1].n_present < base.n_present
+    for extra, key in (('density = "bad.npz"', "density"), ('density = "none.npz"', "density"),
+                       ("max_slope = 40.0", "max_slope")):   # below min_slope's default 60
+        with pytest.raises(SceneError) as err:
+            _load(MINI.replace("seed = 1", "seed = 1\n" + extra), tmp_path)
+        assert f"nodes.b.{key}" in str(err.value), str(err.value)
 
 
 def test_cli_builds_a_tile_and_the_scene_uses_it(tmp_path, monkeypatch, capsys):

@@ -78,6 +78,8 @@ Stolte, N. (2002). Infinite implicit replication. Shape Modeling International.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import drjit as dr
 import mitsuba as mi
 import numpy as np
@@ -89,7 +91,7 @@ from arches_render.field.operators import smooth_max
 
 from .block_hulls import offset_box
 
-__all__ = ["BlockField", "image_boxes"]
+__all__ = ["BlockField", "PresentCopies", "image_boxes"]
 
 _RANGE = 2  # image offsets o in {-2..2}^3
 _CODES = (2 * _RANGE + 1) ** 3
@@ -156,6 +158,36 @@ def _cell_lists(keys_cells):
     return start.astype(np.uint32), count.astype(np.uint32), entry[order].astype(np.uint32)
 
 
+@dataclass(frozen=True)
+class PresentCopies:
+    """The copies a presence table keeps, listed sparsely (a dense ``(nx, ny, nz, B)``
+    table over a terrain-wide region would take hundreds of MB).
+
+    Attributes
+    ----------
+    cells : numpy.ndarray
+        ``(n, 3)`` int64: the virtual cell ``T`` of each present copy (absolute index).
+    blocks : numpy.ndarray
+        ``(n,)`` int64: its block ``i``.
+    tiles_lo : numpy.ndarray
+        ``(3,)``: the first virtual cell of the region the table was decided over.
+    shape : tuple
+        ``(nx, ny, nz, B)``: that region's virtual cells and the tile's blocks.
+    """
+
+    cells: np.ndarray
+    blocks: np.ndarray
+    tiles_lo: np.ndarray
+    shape: tuple
+
+    def dense(self):
+        """The ``(nx, ny, nz, B)`` boolean table (small regions: tests and figures)."""
+        out = np.zeros(self.shape, dtype=bool)
+        i = self.cells - self.tiles_lo
+        out[i[:, 0], i[:, 1], i[:, 2], self.blocks] = True
+        return out
+
+
 class BlockField(Node):
     """Replicated blocks ``t(p)`` of a :class:`~.tile_cache.BlockTile` (module docstring).
 
@@ -173,11 +205,9 @@ class BlockField(Node):
         Octaves of the detail fBm.
     seed : int
         Seed of the detail.
-    presence : numpy.ndarray, optional
-        ``(nx, ny, nz, B)`` booleans: block ``i`` present in virtual cell
-        ``tiles_lo + (x, y, z)``; default: every block in every cell (unbounded).
-    tiles_lo : array_like
-        Integer index of the first virtual cell of ``presence``.
+    presence : PresentCopies, optional
+        The present copies (block ``i`` in virtual cell ``T``); default: every block in
+        every cell (unbounded).
     margin : float
         The clamp ``m`` (m).
     cell_size : float, optional
@@ -188,7 +218,7 @@ class BlockField(Node):
     kind = "blocks_field"
 
     def __init__(self, tile, smoothness=0.25, warp=0.0, warp_wavelength=1.0, warp_octaves=2,
-                 seed=0, presence=None, tiles_lo=(0, 0, 0), margin=0.25, cell_size=None):
+                 seed=0, presence=None, margin=0.25, cell_size=None):
         if not smoothness > 0:
             raise ValueError(f"smoothness must be > 0 (got {smoothness})")
         if not warp >= 0 or not warp_wavelength > 0:
@@ -247,25 +277,22 @@ class BlockField(Node):
         self._m, self._R = opaque_float(self.m_np), opaque_float(self.R_np)
         self._warp, self._inv_wl = opaque_float(self.warp_np), opaque_float(1.0 / self.wavelength_np)
         self._seed = dr.opaque(mi.UInt32, int(seed) & 0xFFFFFFFF)
-        self._setup_presence(presence, tiles_lo, blo, bhi)
+        self._setup_presence(presence, blo, bhi)
 
     # -- presence and the world grid -------------------------------------------------
-    def _setup_presence(self, presence, tiles_lo, blo, bhi):
-        self.presence_np = None
+    def _setup_presence(self, presence, blo, bhi):
+        self.presence = presence
         self.world_lo = None
         if presence is None:
             return
-        presence = np.asarray(presence, dtype=bool)
-        if presence.ndim != 4 or presence.shape[3] != self.tile.n_blocks:
-            raise ValueError("presence must have shape (nx, ny, nz, n_blocks)")
-        self.presence_np, self.tiles_lo = presence, np.asarray(tiles_lo, int)
+        if presence.shape[3] != self.tile.n_blocks:
+            raise ValueError(f"presence lists {presence.shape[3]} blocks, the tile has {self.tile.n_blocks}")
         s = self.s_np
-        t_idx, b_idx = np.nonzero(presence.reshape(-1, self.tile.n_blocks))
+        b_idx = np.asarray(presence.blocks, dtype=np.int64)
         self.n_present = len(b_idx)
         if self.n_present == 0:
             return
-        T = np.stack(np.unravel_index(t_idx, presence.shape[:3]), -1) + self.tiles_lo
-        shift = T * s
+        shift = np.asarray(presence.cells, dtype=np.int64) * s
         lo, hi = blo[b_idx] + shift, bhi[b_idx] + shift
         # The registered boxes contain {t > -m}, a fortiori the solid.
         self.world_lo, self.world_hi = lo.min(0), hi.max(0)
@@ -395,7 +422,7 @@ class BlockField(Node):
     def _eval(self, p):
         """``(t, extra)``; ``extra`` = (empty-space distance, upper bound of the listed
         copies, distance to the world cell's faces) for :meth:`eval_bounds`."""
-        if self.presence_np is None:
+        if self.presence is None:
             return self._tiled(p), None
         if self.world_lo is None:
             return -self._m + mi.Float(0.0) * p.x, None
@@ -425,7 +452,7 @@ class BlockField(Node):
         region emptied took 271 camera steps a ray, against 36 with blocks.)"""
         f, extra = self._eval(p)
         inv = 1.0 / self.lipschitz
-        if self.presence_np is not None and self.world_lo is None:
+        if self.presence is not None and self.world_lo is None:
             return f, tuple(mi.Float(dr.inf) + 0.0 * f if c < self.m_np else 0.0 * f for c in levels)
         out = []
         for c in levels:
@@ -439,7 +466,7 @@ class BlockField(Node):
 
     # -- protocol --------------------------------------------------------------------
     def bounds(self):
-        if self.presence_np is None:
+        if self.presence is None:
             return np.full(3, -np.inf), np.full(3, np.inf)
         if self.world_lo is None:
             return np.zeros(3), -np.ones(3)  # empty

@@ -35,13 +35,15 @@ Paris et al. (2020), section 5 and Figure 11.
 
 from __future__ import annotations
 
+import drjit as dr
 import numpy as np
 
+from arches_render.backend import variant
 from arches_render.field import evaluate
-from arches_render.field.node import Node, opaque_float
+from arches_render.field.node import Node, jit_points, opaque_float
 from arches_render.field.operators import Intersection, Union
 
-from .block_field import BlockField
+from .block_field import BlockField, PresentCopies
 
 __all__ = ["presence_table", "replicate", "Offset"]
 
@@ -63,9 +65,88 @@ def _gradient(host, pts, h):
     return g
 
 
+#: Virtual cells a region may hold (the candidates are an int64 array of this many rows).
+MAX_VIRTUAL_CELLS = 20_000_000
+#: Block copies whose anchors are tested at once (the anchors of this many copies).
+MAX_COPIES = 50_000_000
+
+
+def _box_ranges(host, lo, hi, batch=1 << 18):
+    """``(f_min, f_max)`` of the host over the boxes ``[lo, hi]`` (its ``box_range``:
+    a rigorous enclosure from its local slope bounds), float64 numpy."""
+    variant()
+    f_min, f_max = np.empty(len(lo)), np.empty(len(lo))
+    for k in range(0, len(lo), batch):
+        a, b = host.box_range(jit_points(lo[k:k + batch]), jit_points(hi[k:k + batch]))
+        dr.eval(a, b)
+        m = len(lo[k:k + batch])
+        f_min[k:k + m] = np.broadcast_to(np.asarray(a.numpy(), np.float64), (m,))
+        f_max[k:k + m] = np.broadcast_to(np.asarray(b.numpy(), np.float64), (m,))
+    return f_min, f_max
+
+
+def _copy_uniform(T, b, seed):
+    """A uniform draw in ``[0, 1)`` per copy ``(T, b)``: splitmix64's finalizer chained over
+    the seed, the virtual cell's three indices and the block, vectorised, so that a
+    copy's draw does not depend on which other copies a region holds.
+
+    References
+    ----------
+    Steele, G., Lea, D., Flood, C. (2014). Fast splittable pseudorandom number
+    generators. OOPSLA (the SplitMix64 finalizer).
+    """
+    x = np.full(len(b), np.uint64((int(seed) * 0x9E3779B97F4A7C15) & 0xFFFFFFFFFFFFFFFF), dtype=np.uint64)
+    with np.errstate(over="ignore"):
+        for v in (T[:, 0], T[:, 1], T[:, 2], b):
+            x = (x ^ np.asarray(v, np.int64).view(np.uint64)) * np.uint64(0xBF58476D1CE4E5B9)
+            x ^= x >> np.uint64(31)
+            x *= np.uint64(0x94D049BB133111EB)
+            x ^= x >> np.uint64(29)
+    return (x >> np.uint64(11)).astype(np.float64) / float(1 << 53)
+
+
+def _density_at(density, lo, hi, x, y):
+    """Nearest-cell lookup of a ``(ny, nx)`` grid spanning the region's ``x, y`` (row 0 at
+    ``y0``); 0 outside it."""
+    ny, nx = density.shape
+    i = np.floor((x - lo[0]) / (hi[0] - lo[0]) * nx).astype(np.int64)
+    j = np.floor((y - lo[1]) / (hi[1] - lo[1]) * ny).astype(np.int64)
+    inside = (i >= 0) & (i < nx) & (j >= 0) & (j < ny)
+    out = np.zeros(len(x))
+    out[inside] = density[j[inside], i[inside]]
+    return out
+
+
+def _density_columns(density, lo, hi, T, c_lo, c_hi, s):
+    """Whether any copy of the virtual cells ``T`` can have its centroid on a positive
+    density cell: the cells' centroid boxes ``T s + [c_lo, c_hi]`` against a summed-area
+    table of ``density > 0`` (exact, conservative by one cell)."""
+    ny, nx = density.shape
+    sat = np.zeros((ny + 1, nx + 1), dtype=np.int64)
+    sat[1:, 1:] = np.cumsum(np.cumsum(density > 0, axis=0), axis=1)
+    gx, gy = (hi[0] - lo[0]) / nx, (hi[1] - lo[1]) / ny
+    i0 = np.clip(np.floor((T[:, 0] * s + c_lo[0] - lo[0]) / gx).astype(np.int64) - 1, 0, nx)
+    i1 = np.clip(np.floor((T[:, 0] * s + c_hi[0] - lo[0]) / gx).astype(np.int64) + 2, 0, nx)
+    j0 = np.clip(np.floor((T[:, 1] * s + c_lo[1] - lo[1]) / gy).astype(np.int64) - 1, 0, ny)
+    j1 = np.clip(np.floor((T[:, 1] * s + c_hi[1] - lo[1]) / gy).astype(np.int64) + 2, 0, ny)
+    return (sat[j1, i1] - sat[j0, i1] - sat[j1, i0] + sat[j0, i0]) > 0
+
+
 def presence_table(tile, host, region_lo, region_hi, distance_range=(-1.0, 1.0), min_slope=60.0,
-                   resistance=None, resistance_range=(-np.inf, np.inf), h=0.05):
+                   resistance=None, resistance_range=(-np.inf, np.inf), h=0.05, max_slope=90.0,
+                   density=None, seed=0):
     """Presence ``e_i`` of every block in every virtual cell meeting a region.
+
+    A copy is present when its centroid lies in the region, more than half of its
+    anchors meet the distance, slope and resistance criteria, and (with a ``density``)
+    a uniform draw of the copy falls below the density at its centroid.
+
+    Which copies are tested is pruned without changing the answer: a virtual cell
+    whose anchors' box has a host range (:meth:`~arches_render.field.node.Node.box_range`)
+    outside ``[v_a, v_b]`` has no anchor in the distance range; with a density, cells whose
+    centroids all fall on zero density, and then copies whose draw fails, are dropped
+    before any anchor is evaluated. A region along the foot of every cliff of a
+    terrain is so decided in seconds.
 
     Parameters
     ----------
@@ -78,20 +159,27 @@ def presence_table(tile, host, region_lo, region_hi, distance_range=(-1.0, 1.0),
     distance_range : (float, float)
         ``[v_a, v_b]`` for ``f(a)``.
     min_slope : float
-        Degrees; anchors need ``|g . u_z| < cos(min_slope)`` (0: no test).
+        Degrees; anchors need ``|g . u_z| < cos(min_slope)`` (0: no test): steep walls.
     resistance : Node or float, optional
         Geology resistance ``gamma`` of the host.
     resistance_range : (float, float)
         Accepted ``gamma(a)``.
     h : float
         Finite-difference step of the gradient (m).
+    max_slope : float
+        Degrees; anchors need ``-g . u_z >= cos(max_slope)`` (90: no test): ground facing
+        up, on which a fallen block can rest (an addition to the paper's criteria).
+    density : numpy.ndarray, optional
+        ``(ny, nx)`` probabilities in ``[0, 1]`` over the region's ``x, y`` (row 0 at
+        ``y0``, nearest cell): the chance that a copy centred there is kept (an
+        addition: scattered fallen blocks rather than a continuous layer).
+    seed : int
+        Seed of the copies' draws.
 
     Returns
     -------
-    presence : numpy.ndarray
-        ``(nx, ny, nz, B)`` booleans.
-    tiles_lo : numpy.ndarray
-        Integer index of the first virtual cell.
+    PresentCopies
+        The present copies, with the region's virtual cells.
 
     References
     ----------
@@ -103,20 +191,45 @@ def presence_table(tile, host, region_lo, region_hi, distance_range=(-1.0, 1.0),
     va, vb = (float(v) for v in distance_range)
     if not va <= vb:
         raise ValueError(f"distance_range must be [v_a, v_b] with v_a <= v_b (got {[va, vb]})")
-    s = tile.size
-    t_lo = np.floor(lo / s).astype(int)
-    t_hi = np.floor(hi / s).astype(int)
+    if not 0.0 <= min_slope <= max_slope <= 90.0:
+        raise ValueError(f"slopes must satisfy 0 <= min_slope <= max_slope <= 90 (got {min_slope}, {max_slope})")
+    if density is not None:
+        density = np.asarray(density, dtype=np.float64)
+        if density.ndim != 2 or density.size == 0 or not np.all((density >= 0) & (density <= 1)):
+            raise ValueError("density must be a non-empty 2-D grid of probabilities in [0, 1]")
+    s, B = tile.size, tile.n_blocks
+    t_lo = np.floor(lo / s).astype(np.int64)
+    t_hi = np.floor(hi / s).astype(np.int64)
     nt = t_hi - t_lo + 1
-    if np.prod(nt) * tile.n_blocks > 50_000_000:
-        raise ValueError("region too large for this tile size (more than 5e7 block copies)")
+    if np.prod(nt) > MAX_VIRTUAL_CELLS:
+        raise ValueError(f"region too large for this tile size (more than {MAX_VIRTUAL_CELLS:.0e} virtual cells)")
     T = np.stack(np.meshgrid(*[np.arange(t_lo[a], t_hi[a] + 1) for a in range(3)], indexing="ij"),
                  -1).reshape(-1, 3)
+    if density is not None:
+        T = T[_density_columns(density, lo, hi, T, tile.centroid.min(0), tile.centroid.max(0), s)]
+    if len(T):
+        a = tile.anchors.reshape(-1, 3).astype(np.float64)
+        f_min, f_max = _box_ranges(host, T * s + a.min(0), T * s + a.max(0))
+        slack = 1e-3 * (1.0 + np.maximum(np.abs(f_min), np.abs(f_max)))  # float32 rounding
+        T = T[(f_min - slack <= vb) & (f_max + slack >= va)]
+    if len(T) * B > MAX_COPIES:
+        raise ValueError(f"region too large for this tile size (more than {MAX_COPIES:.0e} block copies)")
+    cell = np.repeat(np.arange(len(T)), B)
+    b = np.tile(np.arange(B), len(T))
+    c = tile.centroid[b].astype(np.float64) + s * T[cell]
+    # The region selects copies by their centroid (anchor 0).
+    keep = np.flatnonzero(np.all((c >= lo) & (c <= hi), axis=-1))
+    if density is not None:
+        p = _density_at(density, lo, hi, c[keep, 0], c[keep, 1])
+        keep, p = keep[p > 0], p[p > 0]
+        keep = keep[_copy_uniform(T[cell[keep]], b[keep], seed) < p]
+    cell, b = cell[keep], b[keep]
     K = tile.anchors.shape[1]
-    A = tile.anchors[None].astype(np.float64) + s * T[:, None, None, :]  # (nT, B, K, 3)
+    A = tile.anchors[b].astype(np.float64) + s * T[cell][:, None, :]  # (n, K, 3)
     pts = A.reshape(-1, 3)
     f = _values(host, pts)
     ok = (f >= va) & (f <= vb)
-    if min_slope > 0:
+    if min_slope > 0 or max_slope < 90:
         sel = np.nonzero(ok)[0]
         # The slope of the host *surface* near the anchor: the gradient deep inside
         # a solid points to whichever face is nearest (the top of a box, for an
@@ -130,17 +243,20 @@ def presence_table(tile, host, region_lo, region_hi, distance_range=(-1.0, 1.0),
             fq = _values(host, q)
         g = _gradient(host, q, h)
         norm = np.linalg.norm(g, axis=1)
-        steep = np.abs(g[:, 2]) < np.cos(np.radians(min_slope)) * np.maximum(norm, 1e-12)
-        ok[sel] &= steep & (norm > 0)
+        good = norm > 0
+        if min_slope > 0:
+            good &= np.abs(g[:, 2]) < np.cos(np.radians(min_slope)) * np.maximum(norm, 1e-12)
+        if max_slope < 90:
+            # Ground faces up (outward normal -g, f > 0 inside): an overhang's flat
+            # underside holds no block.
+            good &= -g[:, 2] >= np.cos(np.radians(max_slope)) * norm
+        ok[sel] &= good
     if resistance is not None:
         rl, rh = (float(v) for v in resistance_range)
         gam = _values(resistance, pts)
         ok &= (gam >= rl) & (gam <= rh)
-    present = ok.reshape(len(T), tile.n_blocks, K).sum(-1) > K / 2
-    # The region selects copies by their centroid (anchor 0).
-    c = A[:, :, 0]
-    present &= np.all((c >= lo) & (c <= hi), axis=-1)
-    return present.reshape(*nt, tile.n_blocks), t_lo
+    present = ok.reshape(len(b), K).sum(-1) > K / 2
+    return PresentCopies(cells=T[cell[present]], blocks=b[present], tiles_lo=t_lo, shape=(*nt, B))
 
 
 class Offset(Node):
@@ -176,7 +292,8 @@ class Offset(Node):
 
 
 def replicate(host, tile, region_lo, region_hi, distance_range=(-1.0, 1.0), min_slope=60.0,
-              resistance=None, resistance_range=(-np.inf, np.inf), protrusion=None, **field_args):
+              resistance=None, resistance_range=(-np.inf, np.inf), protrusion=None, max_slope=90.0,
+              density=None, **field_args):
     """The amplified field ``f~ = max(f, t)``: blocks replicated over a host.
 
     Parameters
@@ -185,8 +302,9 @@ def replicate(host, tile, region_lo, region_hi, distance_range=(-1.0, 1.0), min_
         Host field.
     tile : BlockTile
         Block tile.
-    region_lo, region_hi, distance_range, min_slope, resistance, resistance_range
-        Presence criteria, see :func:`presence_table`.
+    region_lo, region_hi, distance_range, min_slope, resistance, resistance_range, max_slope, density
+        Presence criteria, see :func:`presence_table` (the draws use ``field_args``'
+        ``seed``).
     protrusion : float, optional
         Clip the blocks to ``{f >= -protrusion}`` (``max(f, min(t, f + delta))``): blocks
         stand out of the host by at most that much (none: the paper's ``max(f, t)``).
@@ -203,9 +321,10 @@ def replicate(host, tile, region_lo, region_hi, distance_range=(-1.0, 1.0), min_
     ----------
     Paris et al. (2020), section 5: ``f~ = max(f, t)``.
     """
-    presence, t_lo = presence_table(tile, host, region_lo, region_hi, distance_range, min_slope,
-                                    resistance, resistance_range)
-    blocks = BlockField(tile, presence=presence, tiles_lo=t_lo, **field_args)
+    presence = presence_table(tile, host, region_lo, region_hi, distance_range, min_slope,
+                              resistance, resistance_range, max_slope=max_slope, density=density,
+                              seed=field_args.get("seed", 0))
+    blocks = BlockField(tile, presence=presence, **field_args)
     if protrusion is not None:
         if not protrusion >= 0:
             raise ValueError(f"protrusion must be >= 0 (got {protrusion})")

@@ -16,10 +16,17 @@ blocks                 host (node name or inline table), [structure = "equidimen
                        written by ``arches-render blocks``: replaces the tile keys);
                        shape: [smoothness = 0.25] (smooth-intersection radius R > 0),
                        [warp = 0.04] >= 0 (detail amplitude), [warp_wavelength = 0.5],
-                       [warp_octaves = 2] in [1, 4], [margin = 0.25] (the clamp m);
+                       [warp_octaves = 2] in [1, 4], [margin = 0.25] in (0, 1000] (the clamp m:
+                       deeper than the hit tolerance, 2e-4 x the scene's diagonal, where
+                       the region is seen from afar);
                        presence: [region = host box] [x0, y0, z0, x1, y1, z1],
                        [distance_range = [-1, 1]] (host field at the anchors),
-                       [min_slope = 60] in [0, 90], [resistance] (number or node),
+                       [min_slope = 60] in [0, 90] (walls steeper than it), [max_slope
+                       = 90] in [min_slope, 90] (ground facing up, gentler than it: where
+                       fallen blocks rest; 90: no test), [density] (an .npz whose array
+                       ``density`` (ny, nx) in [0, 1] spans the region's x, y, row 0
+                       south: each copy is kept with the probability at its centroid,
+                       drawn with ``seed``), [resistance] (number or node),
                        [resistance_range = [-inf, inf]], [protrusion] >= 0 (clip the
                        blocks to the host grown by it; none: max(host, t))
 =====================  ==================================================================
@@ -42,12 +49,16 @@ import math
 import numpy as np
 
 from arches_render.field.node import finite_box
+from arches_render.scene.array_files import ArrayFileError, Spec, read_arrays
 from arches_render.scene.paths import scene_file
 
 # The tile builder (numba, scipy.spatial: 0.26 s to import) is imported where a scene
 # has a ``blocks`` node, not by every process that reads the node types.
 
 __all__ = ["NODE_TYPES", "tile_params", "tile_from_table"]
+
+#: The ``density`` file of a ``blocks`` node.
+DENSITY_SPECS = {"density": Spec((None, None), "number", lo=0.0, hi=1.0)}
 
 TILE_KEYS = ("structure", "tile_size", "point_radius", "spacing", "disc_radius", "axis",
              "obliquity", "column_sets", "joint_width", "seed")
@@ -125,10 +136,21 @@ def _blocks(t, ctx):
         else:
             resistance = ctx.build(v, t, "resistance")
     res_range = _range(t, "resistance_range", [-math.inf, math.inf])
+    min_slope = t.number("min_slope", 60.0, lo=0.0, hi=90.0)
+    max_slope = t.number("max_slope", 90.0, lo=min_slope, hi=90.0)
+    density = None
+    if t.has("density"):
+        path = scene_file(t, "density", (".npz",), ctx.base_dir, what="density grid")
+        try:
+            density = read_arrays(path, DENSITY_SPECS, "density grid")["density"]
+        except ArrayFileError as exc:
+            raise t.error("density", str(exc)) from None
+        if density.size == 0:
+            raise t.error("density", "holds an empty grid")
     try:
         return replicate(host, tile, lo, hi,
                          distance_range=_range(t, "distance_range", [-1.0, 1.0]),
-                         min_slope=t.number("min_slope", 60.0, lo=0.0, hi=90.0),
+                         min_slope=min_slope, max_slope=max_slope, density=density,
                          resistance=resistance, resistance_range=res_range,
                          protrusion=t.number("protrusion", None, lo=0.0),
                          smoothness=t.number("smoothness", 0.25, lo=0.0, lo_open=True, hi=5.0),
@@ -136,7 +158,7 @@ def _blocks(t, ctx):
                          warp_wavelength=t.number("warp_wavelength", 0.5, lo=0.0, lo_open=True),
                          warp_octaves=t.integer("warp_octaves", 2, lo=1, hi=4),
                          seed=t.integer("seed", 0, lo=0, hi=2 ** 31 - 1),
-                         margin=t.number("margin", 0.25, lo=0.0, lo_open=True, hi=10.0))
+                         margin=t.number("margin", 0.25, lo=0.0, lo_open=True, hi=1000.0))
     except ValueError as exc:
         raise t.error("region", str(exc)) from None
 
