@@ -135,6 +135,7 @@ class Amplification:
     timer: StepTimer | None = None
     sea_steps: int = SEA_STEPS
     sea_spacing: float | None = None
+    fallen_blocks: bool = False
     sea_level: float | None = None
     rho: Callable | None = None
     children: list = field(default_factory=lambda: ["terrain"])

@@ -146,7 +146,9 @@ def amplify(heights, cell_size, preset, seed, work_dir, prefix="amplified", prog
         ``progress(done, total, label)`` after each generation step.
     options : dict, optional
         Overrides of the ``sea`` preset: ``steps`` (number of erosion steps, default
-        3) and ``spacing`` (Poisson-disc distance of the samples, metres).
+        3) and ``spacing`` (Poisson-disc distance of the samples, metres); of the
+        ``strata`` preset: ``fallen_blocks`` (blocks at the feet of the cliffs,
+        :mod:`.talus`; default off: they about double a close shot's render time).
     sea_level : float or None
         Sea level (m, default 0): the sea is the cells below it connected to the
         border (:mod:`.water`); ``None``: no sea. The ``sea`` preset on a DEM with no
@@ -165,6 +167,7 @@ def amplify(heights, cell_size, preset, seed, work_dir, prefix="amplified", prog
     options = dict(options or {})
     sea_steps = int(options.pop("steps", SEA_STEPS))
     sea_spacing = options.pop("spacing", None)
+    fallen_blocks = bool(options.pop("fallen_blocks", False))
     if options:
         raise ValueError(f"unknown amplify option(s): {', '.join(sorted(options))}")
     rng = np.random.default_rng(seed)
@@ -202,7 +205,8 @@ def amplify(heights, cell_size, preset, seed, work_dir, prefix="amplified", prog
     feature = landform_size(scales, cell, precision)
     R = min(4.0 * cell, 2.0 * feature, 0.45 * min(W, D))
     run = Amplification(NodeTables(work_dir, prefix), H, extent, cell, R, 0.5 * R, rng, scales=scales,
-                        precision=precision, sea_steps=sea_steps, sea_spacing=sea_spacing)
+                        precision=precision, sea_steps=sea_steps, sea_spacing=sea_spacing,
+                        fallen_blocks=fallen_blocks)
     run.timer = StepTimer(["implicitization", "geology", *([] if flat else spec.steps(run)), "construction tree"],
                           progress)
     tree = run.tree
@@ -239,6 +243,7 @@ def amplify(heights, cell_size, preset, seed, work_dir, prefix="amplified", prog
     stats = run.stats
     if "sparse_note" in stats:
         notes.append(stats.pop("sparse_note"))
+    notes += stats.pop("notes", [])  # what the landforms noted (e.g. the fallen blocks)
     stats.update(nodes=int(root.count()), memory_bytes=int(root.tree_nbytes()),
                  primitives=int(sum(v for k, v in stats.items() if k.endswith("primitives"))),
                  timings_s=run.timer.timings, notes=notes, detail_fit=fit)

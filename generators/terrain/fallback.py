@@ -120,7 +120,7 @@ class Attempt:
 
 
 def amplify_soft(heights, cell_size, preset, seed, work_dir, prefix, name, sea_level=0.0, precision=None,
-                 progress=None, shots_progress=None, say=None):
+                 progress=None, shots_progress=None, say=None, options=None):
     """Amplify with the best preset that makes a landform (see the module docstring).
 
     Parameters
@@ -146,6 +146,8 @@ def amplify_soft(heights, cell_size, preset, seed, work_dir, prefix, name, sea_l
         Progress of the amplification steps and of the close shots.
     say : callable, optional
         ``say(line)`` for the ranking line and each ``nothing to carve`` line, as it happens.
+    options : dict, optional
+        :func:`.amplify.amplify`'s options, for every attempt.
 
     Returns
     -------
@@ -166,7 +168,7 @@ def amplify_soft(heights, cell_size, preset, seed, work_dir, prefix, name, sea_l
     for k, (choice, reason) in enumerate(candidates):
         folder = Path(work_dir) / (f"_try{k + 1}" if k else "")
         run = _Run(partial(_amplify_one, H, cell_size, choice, reason, seed, folder, prefix, sea_level, precision,
-                           progress), folder, choice, reason)
+                           progress, options), folder, choice, reason)
         runs.append(run)
         if "note" in run.get().stats:  # a flat DEM: no preset acts on it
             break
@@ -183,9 +185,9 @@ def amplify_soft(heights, cell_size, preset, seed, work_dir, prefix, name, sea_l
     return _keep_first_with_shots(runs, name, preset, shots_progress, notes, tell)
 
 
-def _amplify_one(H, cell_size, choice, reason, seed, folder, prefix, sea_level, precision, progress):
+def _amplify_one(H, cell_size, choice, reason, seed, folder, prefix, sea_level, precision, progress, options):
     result = amplify(H, cell_size, choice, seed, folder, prefix, sea_level=sea_level, precision=precision,
-                     progress=progress)
+                     progress=progress, options=options)
     result.reason = reason
     return result
 

@@ -69,6 +69,7 @@ from .river_erosion import river_erosion
 from .sea_erosion import sea_erosion_step
 from .shallow_erosion import sample_mesh
 from .skeletal_files import save_npz
+from .talus import add_talus
 
 __all__ = ["PRESETS", "Preset", "Amplification", "NodeTables", "StepTimer", "SEA_STEPS", "MAX_PRIMITIVES"]
 
@@ -428,6 +429,9 @@ def strata(run: Amplification) -> None:
     run.tree.add("strata_eroded", {"type": "erosion", "child": "terrain", "field": "strata_field",
                                    "resistance": "geology"})
     run.children = ["strata_eroded"]
+    if run.fallen_blocks:  # opt-in: they cost ~2x render time (stop note of 2026-12-06)
+        run.children = [add_talus(run, "strata_eroded", run.scale("cliff_height_m", 0.25 * run.relief[2]))]
+        run.timer.step("fallen blocks")
     run.stats["erosion_field_primitives"] = int(len(pts))
     run.focus.append(pts)
 
@@ -472,5 +476,6 @@ PRESETS = {
     "hoodoos": Preset("hoodoos (open shape grammar)",
                       hoodoos_geology, hoodoos, lambda run: ["placement probability"]),
     "strata": Preset("layered cliffs with folds and faults (erosion node)",
-                     strata_geology, strata, lambda run: ["cliff sampling"]),
+                     strata_geology, strata,
+                     lambda run: ["cliff sampling"] + (["fallen blocks"] if run.fallen_blocks else [])),
 }

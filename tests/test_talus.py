@@ -1,0 +1,103 @@
+"""Fallen blocks at the feet of cliffs (issue 34): the apron from the DEM, and the
+``strata`` preset's opt-in blocks resting on it."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from helpers import variant
+from robust_helpers import cli_out
+
+variant()
+
+from arches_render.field import evaluate  # noqa: E402
+from arches_render.generators.terrain.amplify import amplify  # noqa: E402
+from arches_render.generators.terrain.talus import PEAK, STEEP_DEG, talus_apron  # noqa: E402
+
+CELL = 10.0
+
+
+def _mesa(n=96, top=80.0):
+    """A round mesa ``top`` m tall, 500 m across, its wall steeper than 60 degrees."""
+    x = (np.arange(n) - (n - 1) / 2) * CELL
+    X, Y = np.meshgrid(x, x)
+    r = np.hypot(X, Y)
+    return (1000.0 + top / (1.0 + np.exp((r - 250.0) / 8.0))).astype(np.float32)
+
+
+def _steep(H):
+    gy, gx = np.gradient(H.astype(np.float64), CELL)
+    return np.hypot(gx, gy) > math.tan(math.radians(STEEP_DEG))
+
+
+def test_apron_lies_below_the_cliffs_and_thins_out_away_from_them():
+    H = _mesa()
+    n = H.shape[0]
+    ext = (-(n - 1) / 2 * CELL, -(n - 1) / 2 * CELL, (n - 1) / 2 * CELL, (n - 1) / 2 * CELL)
+    apron = talus_apron(H, ext, CELL, reach=60.0, block=4.0, border=40.0)
+    assert apron is not None
+    # The grid spans the box exactly: map it back onto the DEM's samples.
+    x0, y0, _, x1, y1, _ = apron.box
+    ny, nx = apron.density.shape
+    xs = x0 + (np.arange(nx) + 0.5) * (x1 - x0) / nx
+    ys = y0 + (np.arange(ny) + 0.5) * (y1 - y0) / ny
+    X, Y = np.meshgrid(xs, ys)
+    i = np.rint((X - ext[0]) / CELL).astype(int)
+    j = np.rint((Y - ext[1]) / CELL).astype(int)
+    d = apron.density
+    r = np.hypot(X, Y)
+    steep = _steep(H)[j, i]
+    assert d.max() <= PEAK and d.min() >= 0.0
+    assert not np.any(d[steep] > 0)                  # never on the wall
+    assert not np.any(d[r < 200.0] > 0)              # nor on the mesa's top
+    assert np.all(d[(r > 275.0) & (r < 285.0)] > 0)  # all round its foot (the wall ends at 269 m)
+    assert not np.any(d[r > 340.0] > 0)              # and not beyond the reach
+    # Thinner farther out: the mean density by ring falls.
+    rings = [d[(r > a) & (r < a + 15.0)].mean() for a in (270.0, 290.0, 310.0)]
+    assert rings[0] > rings[1] > rings[2]
+    flat = np.full((32, 32), 5.0, np.float32)
+    assert talus_apron(flat, (0, 0, 310, 310), CELL, 60.0, 4.0, 40.0) is None
+
+
+def test_strata_fallen_blocks_rest_at_the_foot_of_the_cliffs_only_when_asked(tmp_path):
+    H = _mesa()
+    plain = amplify(H, CELL, "strata", 4, tmp_path / "plain")
+    assert "talus" not in plain.tables                # off by default (render cost)
+    res = amplify(H, CELL, "strata", 4, tmp_path / "talus", options={"fallen_blocks": True})
+    n = res.stats["fallen_blocks"]
+    assert n > 20 and any(note.startswith(f"fallen blocks: {n} blocks") for note in res.stats["notes"])
+    assert res.tables["world"]["children"] == ["talus"]
+    talus = res.root.children[0]
+    blocks = talus.children[1]
+    c = blocks.tile.centroid[blocks.presence.blocks] + blocks.presence.cells * blocks.tile.size
+    r = np.hypot(c[:, 0], c[:, 1])
+    # Outside the wall (steep out to r = 269 m), within the reach (half the cliff, at
+    # least 2 cells), give or take the density grid's half cell.
+    assert np.all(r > 269.0 - 7.1) and np.all(r < 269.0 + 60.0 + 7.1), (r.min(), r.max())
+    # Resting on the ground (the host field is about the height above it, negated): the
+    # blocks' centres lie within a block or two of it, not up the wall or in the air.
+    depth = evaluate(talus.children[0], c)
+    assert np.all(np.abs(depth) < 2.0 * res.tables["talus"]["spacing"]), np.abs(depth).max()
+    again = amplify(H, CELL, "strata", 4, tmp_path / "again", options={"fallen_blocks": True})
+    b2 = again.root.children[0].children[1]
+    assert np.array_equal(b2.presence.cells, blocks.presence.cells)
+    assert np.array_equal(b2.presence.blocks, blocks.presence.blocks)
+
+
+def test_cli_fallen_blocks_flag_writes_the_blocks_and_says_so(tmp_path, capsys):
+    import tomllib
+
+    from arches_render.scene import load_scene
+    np.save(tmp_path / "mesa.npy", _mesa())
+    out = tmp_path / "mesa.toml"
+    rc, stdout, err = cli_out(capsys, "amplify", tmp_path / "mesa.npy", "-o", out, "--cell-size", "10",
+                              "--preset", "strata", "--fallen-blocks", "-q")
+    assert rc == 0, err
+    text = out.read_text()
+    assert "--preset strata --seed 0 --cell-size 10 --sea-level 0 --fallen-blocks" in text
+    assert "# Note: fallen blocks: " in text and "fallen blocks: " in stdout
+    doc = tomllib.loads(text)
+    assert doc["nodes"]["talus"]["type"] == "blocks" and (tmp_path / doc["nodes"]["talus"]["density"]).exists()
+    blocks = [n for n in load_scene(out).field.walk() if n.kind == "blocks_field"]
+    assert len(blocks) == 1 and blocks[0].n_present > 20
