@@ -43,6 +43,7 @@ from arches_render.field.dequantize import dequantize, quantization_step
 from .detail import default_precision, detail_amplification
 from .preset_choice import choose_preset, landform_scales
 from .presets import PRESETS, SEA_STEPS, Amplification, NodeTables, StepTimer
+from .sea_floor import DEPTH_AT_SHORE, SLOPE, flat_sea, lay_sea_floor
 from .water import WaterBodies, find_water, water_mesh
 
 __all__ = ["PRESETS", "PRESET_NAMES", "Amplified", "amplify"]
@@ -173,14 +174,20 @@ def amplify(heights, cell_size, preset, seed, work_dir, prefix="amplified", prog
     rng = np.random.default_rng(seed)
     H = np.asarray(heights, dtype=np.float32).astype(np.float64)
     notes = []
+    cell = float(cell_size)
+    sheet = flat_sea(H, sea_level)  # found before the smoothing below moves its cells
     step = quantization_step(H)
     if step is not None:
         # Whole-metre DEMs are staircases where the ground rises less than a step a cell.
         H = dequantize(H, step, sea_level)
         notes.append(f"heights on a {step:g} m lattice: terraces smoothed away, each height moved by at "
                      f"most {0.5 * step:g} m")
+    if sheet is not None:
+        H, deepest = lay_sea_floor(H, sheet, cell, sea_level)
+        notes.append(f"the sea is a flat sheet at {sea_level:g} m on {100 * sheet.mean():.0f} % of the tile (no "
+                     f"bathymetry): a sea floor was laid under it, {DEPTH_AT_SHORE:g} m deep at the shore, "
+                     f"{100 * SLOPE:g} % deeper a metre out, at most {deepest:.3g} m")
     ny, nx = H.shape
-    cell = float(cell_size)
     W, D = (nx - 1) * cell, (ny - 1) * cell
     extent = (-W / 2, -D / 2, W / 2, D / 2)  # centred: float32 keeps its precision at the corners
     precision = float(precision) if precision else default_precision(cell)
