@@ -256,6 +256,28 @@ class BrickGrid:
         brick = ((i[:, 2] // BRICK) * bricks[1] + i[:, 1] // BRICK) * bricks[0] + i[:, 0] // BRICK
         return brick * BRICK_CELLS + ((i[:, 2] % BRICK) * BRICK + i[:, 1] % BRICK) * BRICK + i[:, 0] % BRICK
 
+    def cell_centres(self) -> np.ndarray:
+        """``(stored_cells, 3)`` centres of the stored cells, in storage order."""
+        stored = np.flatnonzero(self.slots_np != NO_SLOT)
+        bx, by = int(self.bricks[0]), int(self.bricks[1])
+        b = np.repeat(stored, BRICK_CELLS)
+        local = np.tile(np.arange(BRICK_CELLS), len(stored))
+        ix = (b % bx) * BRICK + (local & 7)
+        iy = ((b // bx) % by) * BRICK + ((local >> 3) & 7)
+        iz = (b // (bx * by)) * BRICK + (local >> 6)
+        return self.grid_lo + (np.stack([ix, iy, iz], -1) + 0.5) * self.cell
+
+    def order_lists(self, key) -> None:
+        """Sort every cell's list by ``key(centres, entries)`` (ascending; e.g. the
+        distance from the cell's centre to each listed primitive: nearest first, for
+        loops that stop early)."""
+        count = np.diff(self.offset_np.astype(np.int64))
+        cell = np.repeat(np.arange(len(count)), count)
+        centres = self.cell_centres()[cell]
+        order = np.lexsort((key(centres, self.index_np), cell))
+        self.index_np = self.index_np[order]
+        self.index = mi.UInt32(self.index_np)
+
     def cell_list(self, p):
         """``(start, count)`` of the list of the cell holding ``p`` (count 0 in unstored bricks)."""
         cell, stored, _ = self.layout.lookup(p)

@@ -84,6 +84,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from arches_render.field.brick_grid import BRICK, MAX_BRICKS, BrickGrid, cell_ranges
 from arches_render.field.node import Node, box_distance, cell_index, jit_floats, opaque_float
 from arches_render.field.packed_columns import gather_columns, pack_columns, uint_column
 from arches_render.field.noise import corner_hash, fade, fbm_lipschitz, fbm_range, grad_dot
@@ -94,6 +95,10 @@ from .block_hulls import offset_box
 __all__ = ["BlockField", "PresentCopies", "image_boxes"]
 
 _RANGE = 2  # image offsets o in {-2..2}^3
+#: Most cells the world grid's bricks hold (12 bytes a cell: 25 MB). Fallen blocks
+#: along a 5.7 km tile's cliffs: 5.3 M cells at the tile's lookup size, 2.1 M at twice
+#: it, the same render time.
+WORLD_CELLS = 1 << 21
 _CODES = (2 * _RANGE + 1) ** 3
 
 
@@ -296,47 +301,28 @@ class BlockField(Node):
         lo, hi = blo[b_idx] + shift, bhi[b_idx] + shift
         # The registered boxes contain {t > -m}, a fortiori the solid.
         self.world_lo, self.world_hi = lo.min(0), hi.max(0)
-        cw = self.cell_t
-        res = np.maximum(np.ceil((self.world_hi - self.world_lo) / cw).astype(int), 1)
-        while np.prod(res) > 96 ** 3:
-            cw *= 1.25
-            res = np.maximum(np.ceil((self.world_hi - self.world_lo) / cw).astype(int), 1)
-        self.world_res, self.world_cell = res, cw
-        # The present copies, listed in the world cells their grown boxes meet
-        # (nearest first). Same exactness argument as the tile-local lists, with no
+        # The present copies, listed in the cells of a sparse brick grid (cells of the
+        # tile's lookup size, or coarser where that would take more than WORLD_CELLS:
+        # a few copies a cell; a dense 96^3 grid over a terrain-wide region listed
+        # tens) that their grown boxes meet, nearest first. Same exactness argument as the tile-local lists, with no
         # presence test left for the kernel.
-        i0 = np.clip(np.floor((lo - self.world_lo) / cw).astype(int), 0, res - 1)
-        i1 = np.clip(np.floor((hi - self.world_lo) / cw).astype(int), 0, res - 1)
-        cells, entries, prios = [], [], []
-        occ = np.zeros(tuple(res), dtype=bool)
+        cw = self.cell_t / 1.5
+        while True:  # coarser while the bricks would hold more than WORLD_CELLS cells
+            cw *= 1.5
+            res = np.maximum(np.ceil((self.world_hi - self.world_lo) / cw).astype(np.int64), 1)
+            if np.prod(-(-res // BRICK)) > MAX_BRICKS:
+                continue
+            i0, i1 = cell_ranges(lo, hi, self.world_lo, cw, res)
+            if BrickGrid.stored_bricks(i0, i1, res).sum() * BRICK ** 3 <= WORLD_CELLS:
+                break
+        self.world = BrickGrid(i0, i1, lo, hi, self.world_lo, cw, res)
         cen = self.tile.centroid[b_idx] + shift
-        for c in range(self.n_present):
-            a, b = i0[c], i1[c]
-            occ[a[0]:b[0] + 1, a[1]:b[1] + 1, a[2]:b[2] + 1] = True
-            g = np.stack(np.meshgrid(*[np.arange(a[k], b[k] + 1) for k in range(3)], indexing="ij"),
-                         -1).reshape(-1, 3)
-            cells.append((g[:, 0] * res[1] + g[:, 1]) * res[2] + g[:, 2])
-            entries.append(np.full(len(g), c))
-            prios.append(np.linalg.norm(self.world_lo + (g + 0.5) * cw - cen[c], axis=1))
-        start, count, index = _cell_lists((np.concatenate(cells), np.concatenate(entries),
-                                           np.concatenate(prios), int(np.prod(res))))
-        self.world_list_len, self.world_max_per_cell = len(index), int(count.max())
-        self._wstart, self._wcount, self._windex = mi.UInt32(start), mi.UInt32(count), mi.UInt32(index)
+        self.world.order_lists(lambda centres, entries: np.linalg.norm(centres - cen[entries], axis=1))
         # A copy's shift and block side by side: one packet gather a copy.
         self._copies, _ = pack_columns([*(shift[:, k] for k in range(3)), b_idx])
-        from scipy.ndimage import distance_transform_edt
-        k = distance_transform_edt(~occ)
-        self._wempty = mi.Float(np.maximum((k - np.sqrt(3.0)) * cw, 0.0).reshape(-1).astype(np.float32))
         self._wlo = [opaque_float(v) for v in self.world_lo]
         self._whi = [opaque_float(v) for v in self.world_lo + res * cw]
         self._winv = opaque_float(1.0 / cw)
-
-    def _world_cell(self, p):
-        rx, ry, rz = (int(v) for v in self.world_res)
-        ix = cell_index((p.x - self._wlo[0]) * self._winv, rx)
-        iy = cell_index((p.y - self._wlo[1]) * self._winv, ry)
-        iz = cell_index((p.z - self._wlo[2]) * self._winv, rz)
-        return (ix * ry + iy) * rz + iz
 
     # -- evaluation ------------------------------------------------------------------
     def _detail(self, p):
@@ -399,14 +385,12 @@ class BlockField(Node):
         return dr.while_loop((mi.UInt32(0), -self._m + mi.Float(0.0)), lambda j, best: j < count,
                              body, label="block_images")[1]
 
-    def _present(self, p, cell):
-        """``t`` over the present copies listed in the world cell of ``p``."""
-        start = dr.gather(mi.UInt32, self._wstart, cell)
-        count = dr.gather(mi.UInt32, self._wcount, cell)
+    def _present(self, p, start, count):
+        """``t`` over the ``count`` present copies listed from ``start`` (the world cell of ``p``)."""
         det = self._detail(p) if self.warp_np > 0 else None
 
         def body(j, best, upper):
-            cx, cy, cz, b = gather_columns(self._copies, dr.gather(mi.UInt32, self._windex, start + j), 4, 4)
+            cx, cy, cz, b = gather_columns(self._copies, dr.gather(mi.UInt32, self.world.index, start + j), 4, 4)
             b = uint_column(b)
             x = p - mi.Vector3f(cx, cy, cz)
             best, v = self._fold(b, x, mi.Bool(True), best, det)
@@ -427,13 +411,12 @@ class BlockField(Node):
         if self.world_lo is None:
             return -self._m + mi.Float(0.0) * p.x, None
         outside = box_distance(p, self._wlo, self._whi)
-        cell = self._world_cell(p)
-        count = dr.gather(mi.UInt32, self._wcount, cell)
-        f, upper = dr.if_stmt((p, cell), (outside <= 0.0) & (count > 0),
-                              lambda p, cell: self._present(p, cell),
-                              lambda p, cell: (-self._m + mi.Float(0.0) * p.x, mi.Float(-1e30)),
+        start, count = self.world.cell_list(p)
+        f, upper = dr.if_stmt((p, start, count), (outside <= 0.0) & (count > 0),
+                              lambda p, start, count: self._present(p, start, count),
+                              lambda p, start, count: (-self._m + mi.Float(0.0) * p.x, mi.Float(-1e30)),
                               label="blocks_near")
-        empty = dr.maximum(dr.gather(mi.Float, self._wempty, cell), outside)
+        empty = dr.maximum(self.world.empty_distance(p), outside)
         rel = (p - mi.Point3f(*self._wlo)) * self._winv
         frac = rel - dr.floor(rel)
         face = dr.minimum(dr.min(frac), dr.min(1.0 - frac)) / self._winv
@@ -487,5 +470,5 @@ class BlockField(Node):
     def nbytes(self):
         n = 64 + self.tile.nbytes() + self.res_t ** 3 * 8 + self.list_len * 4
         if self.world_lo is not None:
-            n += int(np.prod(self.world_res)) * 12 + self.world_list_len * 4 + self.n_present * 16
+            n += self.world.nbytes() + self.n_present * 16
         return n
