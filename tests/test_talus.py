@@ -60,14 +60,19 @@ def test_apron_lies_below_the_cliffs_and_thins_out_away_from_them():
     assert talus_apron(flat, (0, 0, 310, 310), CELL, 60.0, 4.0, 40.0) is None
 
 
-def test_strata_fallen_blocks_rest_at_the_foot_of_the_cliffs_only_when_asked(tmp_path):
+def test_strata_fallen_blocks_rest_at_the_foot_of_the_cliffs_unless_refused(tmp_path):
     H = _mesa()
-    plain = amplify(H, CELL, "strata", 4, tmp_path / "plain")
-    assert "talus" not in plain.tables                # off by default (render cost)
-    res = amplify(H, CELL, "strata", 4, tmp_path / "talus", options={"fallen_blocks": True})
+    plain = amplify(H, CELL, "strata", 4, tmp_path / "plain", options={"fallen_blocks": False})
+    assert "talus" not in plain.tables and plain.landforms is None
+    res = amplify(H, CELL, "strata", 4, tmp_path / "talus")
     n = res.stats["fallen_blocks"]
     assert n > 20 and any(note.startswith(f"fallen blocks: {n} blocks") for note in res.stats["notes"])
     assert res.tables["world"]["children"] == ["talus"]
+    # Close shots and the presets' ranking measure the cliffs, not the blocks: the same
+    # tree as without them.
+    assert res.landforms is not None and res.landforms.kind == "erosion"
+    p = np.random.default_rng(0).uniform([-400, -400, 990], [400, 400, 1090], (20000, 3))
+    assert np.array_equal(evaluate(res.landforms, p), evaluate(plain.root, p))
     talus = res.root.children[0]
     blocks = talus.children[1]
     c = blocks.tile.centroid[blocks.presence.blocks] + blocks.presence.cells * blocks.tile.size
@@ -79,25 +84,32 @@ def test_strata_fallen_blocks_rest_at_the_foot_of_the_cliffs_only_when_asked(tmp
     # blocks' centres lie within a block or two of it, not up the wall or in the air.
     depth = evaluate(talus.children[0], c)
     assert np.all(np.abs(depth) < 2.0 * res.tables["talus"]["spacing"]), np.abs(depth).max()
-    again = amplify(H, CELL, "strata", 4, tmp_path / "again", options={"fallen_blocks": True})
+    again = amplify(H, CELL, "strata", 4, tmp_path / "again")
     b2 = again.root.children[0].children[1]
     assert np.array_equal(b2.presence.cells, blocks.presence.cells)
     assert np.array_equal(b2.presence.blocks, blocks.presence.blocks)
 
 
-def test_cli_fallen_blocks_flag_writes_the_blocks_and_says_so(tmp_path, capsys):
+def test_cli_writes_the_blocks_bare_and_says_so_unless_refused(tmp_path, capsys):
     import tomllib
 
     from arches_render.scene import load_scene
     np.save(tmp_path / "mesa.npy", _mesa())
     out = tmp_path / "mesa.toml"
     rc, stdout, err = cli_out(capsys, "amplify", tmp_path / "mesa.npy", "-o", out, "--cell-size", "10",
-                              "--preset", "strata", "--fallen-blocks", "-q")
+                              "--preset", "strata", "-q")
     assert rc == 0, err
     text = out.read_text()
-    assert "--preset strata --seed 0 --cell-size 10 --sea-level 0 --fallen-blocks" in text
     assert "# Note: fallen blocks: " in text and "fallen blocks: " in stdout
     doc = tomllib.loads(text)
     assert doc["nodes"]["talus"]["type"] == "blocks" and (tmp_path / doc["nodes"]["talus"]["density"]).exists()
+    look = doc["materials"]["landscape"]
+    assert {m["layer"] for m in look["masks"]} == {"grass", "sand"}
+    assert look["cavity"]["node"] == doc["nodes"]["talus"]["host"]
     blocks = [n for n in load_scene(out).field.walk() if n.kind == "blocks_field"]
     assert len(blocks) == 1 and blocks[0].n_present > 20
+    rc, stdout, err = cli_out(capsys, "amplify", tmp_path / "mesa.npy", "-o", out, "--cell-size", "10",
+                              "--preset", "strata", "--no-fallen-blocks", "-q")
+    assert rc == 0, err
+    text = out.read_text()
+    assert "--sea-level 0 --no-fallen-blocks" in text and "talus" not in tomllib.loads(text)["nodes"]

@@ -135,7 +135,9 @@ class Amplification:
     timer: StepTimer | None = None
     sea_steps: int = SEA_STEPS
     sea_spacing: float | None = None
-    fallen_blocks: bool = False
+    fallen_blocks: bool = True
+    #: node -> the same node without its accessories (the fallen blocks' host)
+    bare: dict = field(default_factory=dict)
     sea_level: float | None = None
     rho: Callable | None = None
     children: list = field(default_factory=lambda: ["terrain"])

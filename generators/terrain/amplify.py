@@ -88,6 +88,9 @@ class Amplified:
         Primitive counts, node count, memory, timings per step, notes.
     water_file : str or None
         The water surfaces (relative to the scene file).
+    landforms : Node or None
+        The tree without its accessories (fallen blocks): what close shots frame and
+        measure (None: ``root``).
     """
 
     tables: dict
@@ -105,6 +108,7 @@ class Amplified:
     sea_level: float | None = None
     stats: dict = field(default_factory=dict)
     water_file: str | None = None
+    landforms: object = None
 
     @property
     def terrain(self):
@@ -149,7 +153,8 @@ def amplify(heights, cell_size, preset, seed, work_dir, prefix="amplified", prog
         Overrides of the ``sea`` preset: ``steps`` (number of erosion steps, default
         3) and ``spacing`` (Poisson-disc distance of the samples, metres); of the
         ``strata`` preset: ``fallen_blocks`` (blocks at the feet of the cliffs,
-        :mod:`.talus`; default off: they about double a close shot's render time).
+        :mod:`.talus`; default on: a shot that sees them renders 30-45 % slower, one
+        that does not 3-15 %).
     sea_level : float or None
         Sea level (m, default 0): the sea is the cells below it connected to the
         border (:mod:`.water`); ``None``: no sea. The ``sea`` preset on a DEM with no
@@ -168,7 +173,7 @@ def amplify(heights, cell_size, preset, seed, work_dir, prefix="amplified", prog
     options = dict(options or {})
     sea_steps = int(options.pop("steps", SEA_STEPS))
     sea_spacing = options.pop("spacing", None)
-    fallen_blocks = bool(options.pop("fallen_blocks", False))
+    fallen_blocks = bool(options.pop("fallen_blocks", True))
     if options:
         raise ValueError(f"unknown amplify option(s): {', '.join(sorted(options))}")
     rng = np.random.default_rng(seed)
@@ -256,6 +261,8 @@ def amplify(heights, cell_size, preset, seed, work_dir, prefix="amplified", prog
                  timings_s=run.timer.timings, notes=notes, detail_fit=fit)
     result = Amplified(tree.tables, tree.files, root, extent, H, preset, reason, scales, precision, amp, water,
                        focus, water.sea_level, stats)
+    if len(children) == 1 and children[0] in run.bare:
+        result.landforms = tree.builder.named(run.bare[children[0]])
     mesh = water_mesh(water, extent, sea_reach_cells=int(math.ceil(2.5 * feature / cell)) + 1)
     if mesh is not None:
         result.water_file = tree.file("water.ply", lambda p: mesh.export(p))

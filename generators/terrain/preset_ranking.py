@@ -64,9 +64,9 @@ def visible_volume(result) -> tuple[float, float]:
     feature = result.feature
     if not result.stats.get("primitives"):
         return 0.0, feature
-    plain = result.terrain
-    return float(sum(landform_volume(result.root, plain, box, reach=feature)[0]
-                     for box in landform_cells(result.root, result.extent, feature))), feature
+    plain, root = result.terrain, result.landforms or result.root  # (the landforms, not the fallen blocks)
+    return float(sum(landform_volume(root, plain, box, reach=feature)[0]
+                     for box in landform_cells(root, result.extent, feature))), feature
 
 
 def rank_order(volumes, features) -> list[int]:

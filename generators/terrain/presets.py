@@ -422,6 +422,8 @@ def strata(run: Amplification) -> None:
     pts, _ = sample_mesh(mesh, run.spacing_for(area, 0.6 * Rd), (steep & inner).astype(float), run.rng)
     run.timer.step("cliff sampling")
     if not len(pts):
+        if run.fallen_blocks:  # no cliff, no block
+            run.timer.step("fallen blocks")
         return
     rel = run.tree.file("strata_erosion.npz", lambda p: save_npz(p, a=pts, radius=np.full(len(pts), Rd),
                                                                   energy=np.full(len(pts), 2.0 * T)))
@@ -429,7 +431,7 @@ def strata(run: Amplification) -> None:
     run.tree.add("strata_eroded", {"type": "erosion", "child": "terrain", "field": "strata_field",
                                    "resistance": "geology"})
     run.children = ["strata_eroded"]
-    if run.fallen_blocks:  # opt-in: they cost ~2x render time (stop note of 2026-12-06)
+    if run.fallen_blocks:
         run.children = [add_talus(run, "strata_eroded", run.scale("cliff_height_m", 0.25 * run.relief[2]))]
         run.timer.step("fallen blocks")
     run.stats["erosion_field_primitives"] = int(len(pts))

@@ -369,7 +369,7 @@ def scene_document(result, name, work_dir, progress=None, close=3):
     # lens (sun_for). Choosing it for every view left none clear of them all but one that
     # lit the first from the side (Jacksboro: 74 degrees from its ideal; shadow rays 40
     # steps), so the other close shots turn away from it instead (shots.close_shots).
-    shots = close_shots(result.root, result.terrain, H, extent, feature,
+    shots = close_shots(result.landforms or result.root, result.terrain, H, extent, feature,
                         water_level=water.level if water is not None else None, water_mesh=wmesh, count=close,
                         margin=result.terrain.R_np + 2 * stats["cell_size"], progress=progress,
                         sun=lambda first: (sun_for(sun_views(first))["azimuth"], SUN_CLEAR))
@@ -387,6 +387,12 @@ def scene_document(result, name, work_dir, progress=None, close=3):
                                                       preset=result.preset, cell=stats["cell_size"])},
         "field": {"root": "world", "material": "landscape"},
     }
+    look = stats.get("fallen_blocks_look")
+    if look:  # fallen blocks: bare rock, and the occlusion of the ground they lie on (.talus)
+        mat = doc["materials"]["landscape"]
+        mat["masks"] = look["masks"]
+        if "cavity" in mat:
+            mat["cavity"]["node"] = look["cavity_node"]
     far = {"node": "terrain", "material": "landscape"}
     if water is not None and water.wet:
         doc["materials"]["water"] = {"type": "diffuse", "color": [0.03, 0.09, 0.12]}

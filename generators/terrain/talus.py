@@ -46,7 +46,7 @@ from scipy.ndimage import distance_transform_edt
 from arches_render.atomic import atomic_write
 from arches_render.npzfile import write_npz
 
-__all__ = ["Apron", "talus_apron", "add_talus"]
+__all__ = ["Apron", "talus_apron", "add_talus", "bare_rock_masks"]
 
 #: DEM slope (degrees) from which a cell is cliff (the strata preset's cliff sampling).
 STEEP_DEG = 40.0
@@ -130,6 +130,34 @@ def talus_apron(H, extent, cell, reach, block, border):
     return Apron(crop.astype(np.float32), tuple(float(v) for v in box), float(apron.sum()) * cell * cell)
 
 
+def bare_rock_masks(host: str, talus: str, block: float) -> list:
+    """Material masks that keep grass and sand off the blocks' faces.
+
+    The landscape material grows grass and sand on gentle ground; a block's flat top
+    would read as a grassy platform. The mask's field is ``min(f_host, -f_talus)``
+    (``difference`` of the nodes): at a hit on a block it is the host's value there,
+    minus the point's height above the ground, and at a hit on the ground about 0
+    (within the tracer's tolerance, a few decimetres at kilometres). The layers keep
+    their coverage above ``-0.12 b`` and lose it below ``-0.25 b``: a block's top is
+    bare, its foot may be grown round.
+
+    Parameters
+    ----------
+    host, talus : str
+        The carved terrain's node and the blocks node over it.
+    block : float
+        Block size (m).
+
+    Returns
+    -------
+    list
+        ``masks`` entries of a ``triplanar`` material.
+    """
+    node = {"type": "difference", "children": [host, talus]}
+    return [{"layer": layer, "node": node, "lo": -0.25 * block, "hi": -0.12 * block}
+            for layer in ("grass", "sand")]
+
+
 def _clamp_margin(run):
     """The blocks field's clamp ``m`` (its value wherever no block is near): deeper than
     the tracer's hit tolerance anywhere in the scene (``eps t`` up to ``eps`` times the
@@ -179,6 +207,12 @@ def add_talus(run, host: str, cliff_height: float) -> str:
         "min_slope": 0.0, "max_slope": REST_DEG, "density": rel, "margin": _clamp_margin(run)})
     n = int(node.children[1].n_present)
     run.stats["fallen_blocks"] = n
+    # The material's cavity term samples the field in the air around a point as a
+    # distance; the blocks' clamp (-m wherever no block is near) made the air over
+    # the whole apron read as rock and darkened every shot by 10 % (a caldera's walls
+    # at 150 m cells): it samples the carved terrain instead.
+    run.stats["fallen_blocks_look"] = {"masks": bare_rock_masks(host, "talus", block), "cavity_node": host}
+    run.bare["talus"] = host  # close shots frame the cliffs, not the blocks
     run.stats.setdefault("notes", []).append(
         f"fallen blocks: {n} blocks about {block:.3g} m across at the feet of the cliffs, "
         f"on {apron.area_m2 / 1e6:.3g} km2 within {reach:.3g} m of them")
