@@ -41,7 +41,7 @@ def test_flat_sheet_found_and_floored_land_and_lagoon_left_alone():
     row = out[40, :100]
     assert np.all(np.diff(row[::-1]) <= 1e-9) and deepest <= 0.2 * float(H.max()) + 1e-9
     # No sheet: a DEM with bathymetry, a sheet under 1 % of the tile, no sea level.
-    coast = np.load(REPO / "scenes" / "data" / "eroded_coast.npy")
+    coast = np.load(REPO / "scenes" / "data" / "eroded_coast.npy", allow_pickle=False)
     assert flat_sea(coast, 0.0) is None
     small = H.copy()
     small[:, :] = np.maximum(small, 1.0)
