@@ -69,6 +69,8 @@ def _gradient(host, pts, h):
 MAX_VIRTUAL_CELLS = 20_000_000
 #: Block copies whose anchors are tested at once (the anchors of this many copies).
 MAX_COPIES = 50_000_000
+#: Candidate copies drawn at a time.
+COPY_BATCH = 1 << 20
 
 
 def _box_ranges(host, lo, hi, batch=1 << 18):
@@ -141,9 +143,10 @@ def presence_table(tile, host, region_lo, region_hi, distance_range=(-1.0, 1.0),
     anchors meet the distance, slope and resistance criteria, and (with a ``density``)
     a uniform draw of the copy falls below the density at its centroid.
 
-    Which copies are tested is pruned without changing the answer: a virtual cell
-    whose anchors' box has a host range (:meth:`~arches_render.field.node.Node.box_range`)
-    outside ``[v_a, v_b]`` has no anchor in the distance range; with a density, cells whose
+    Which copies are tested is pruned without changing the answer: a group of blocks
+    whose anchors' box has, in a virtual cell, a host range
+    (:meth:`~arches_render.field.node.Node.box_range`) outside ``[v_a, v_b]`` has no
+    anchor in the distance range there; with a density, cells whose
     centroids all fall on zero density, and then copies whose draw fails, are dropped
     before any anchor is evaluated. A region along the foot of every cliff of a
     terrain is so decided in seconds.
@@ -203,27 +206,54 @@ def presence_table(tile, host, region_lo, region_hi, distance_range=(-1.0, 1.0),
     nt = t_hi - t_lo + 1
     if np.prod(nt) > MAX_VIRTUAL_CELLS:
         raise ValueError(f"region too large for this tile size (more than {MAX_VIRTUAL_CELLS:.0e} virtual cells)")
-    T = np.stack(np.meshgrid(*[np.arange(t_lo[a], t_hi[a] + 1) for a in range(3)], indexing="ij"),
-                 -1).reshape(-1, 3)
+    # Columns first: a density leaves most of a terrain-wide region's columns empty.
+    cols = np.stack(np.meshgrid(np.arange(t_lo[0], t_hi[0] + 1), np.arange(t_lo[1], t_hi[1] + 1), [0],
+                                indexing="ij"), -1).reshape(-1, 3)
     if density is not None:
-        T = T[_density_columns(density, lo, hi, T, tile.centroid.min(0), tile.centroid.max(0), s)]
+        cols = cols[_density_columns(density, lo, hi, cols, tile.centroid.min(0), tile.centroid.max(0), s)]
+    T = np.repeat(cols, nt[2], axis=0)
+    T[:, 2] = np.tile(np.arange(t_lo[2], t_hi[2] + 1), len(cols))
+    # The tile's blocks in eight groups (by their centroid's octant of the tile), each
+    # with the box of its anchors: a group whose box's host range misses [v_a, v_b]
+    # in a cell has no anchor in range there (a box four times smaller than the whole
+    # tile's keeps a third of the copies: the ground's band is thin).
+    anchors = tile.anchors.astype(np.float64)
+    group = ((tile.centroid >= s / 2).astype(np.int64) * [1, 2, 4]).sum(1)
+    g_lo = np.array([anchors[group == g].reshape(-1, 3).min(0) if np.any(group == g) else np.zeros(3)
+                     for g in range(8)])
+    g_hi = np.array([anchors[group == g].reshape(-1, 3).max(0) if np.any(group == g) else -np.ones(3)
+                     for g in range(8)])
+    live = np.zeros((len(T), 8), dtype=bool)
     if len(T):
-        a = tile.anchors.reshape(-1, 3).astype(np.float64)
-        f_min, f_max = _box_ranges(host, T * s + a.min(0), T * s + a.max(0))
+        corner = np.repeat(T * s, 8, axis=0)
+        f_min, f_max = _box_ranges(host, corner + np.tile(g_lo, (len(T), 1)), corner + np.tile(g_hi, (len(T), 1)))
         slack = 1e-3 * (1.0 + np.maximum(np.abs(f_min), np.abs(f_max)))  # float32 rounding
-        T = T[(f_min - slack <= vb) & (f_max + slack >= va)]
+        live = ((f_min - slack <= vb) & (f_max + slack >= va)).reshape(len(T), 8)
+        live[:, ~np.isin(np.arange(8), group)] = False
+        T, live = T[live.any(1)], live[live.any(1)]
     if len(T) * B > MAX_COPIES:
         raise ValueError(f"region too large for this tile size (more than {MAX_COPIES:.0e} block copies)")
-    cell = np.repeat(np.arange(len(T)), B)
-    b = np.tile(np.arange(B), len(T))
-    c = tile.centroid[b].astype(np.float64) + s * T[cell]
-    # The region selects copies by their centroid (anchor 0).
-    keep = np.flatnonzero(np.all((c >= lo) & (c <= hi), axis=-1))
-    if density is not None:
-        p = _density_at(density, lo, hi, c[keep, 0], c[keep, 1])
-        keep, p = keep[p > 0], p[p > 0]
-        keep = keep[_copy_uniform(T[cell[keep]], b[keep], seed) < p]
-    cell, b = cell[keep], b[keep]
+    # The copies of a few thousand cells at a time (memory: a terrain's apron holds
+    # millions of candidate copies, of which the draws keep a few per cent).
+    cells, blocks = [], []
+    step = max(1, COPY_BATCH // B)
+    for k in range(0, len(T), step):
+        Tk = T[k:k + step]
+        cell = np.repeat(np.arange(k, k + len(Tk)), B)
+        b = np.tile(np.arange(B), len(Tk))
+        kept = live[cell, group[b]]
+        cell, b = cell[kept], b[kept]
+        c = tile.centroid[b].astype(np.float64) + s * T[cell]
+        # The region selects copies by their centroid (anchor 0).
+        keep = np.flatnonzero(np.all((c >= lo) & (c <= hi), axis=-1))
+        if density is not None:
+            p = _density_at(density, lo, hi, c[keep, 0], c[keep, 1])
+            keep, p = keep[p > 0], p[p > 0]
+            keep = keep[_copy_uniform(T[cell[keep]], b[keep], seed) < p]
+        cells.append(cell[keep])
+        blocks.append(b[keep])
+    cell = np.concatenate(cells) if cells else np.zeros(0, np.int64)
+    b = np.concatenate(blocks) if blocks else np.zeros(0, np.int64)
     K = tile.anchors.shape[1]
     A = tile.anchors[b].astype(np.float64) + s * T[cell][:, None, :]  # (n, K, 3)
     pts = A.reshape(-1, 3)
