@@ -69,7 +69,7 @@ from .river_erosion import river_erosion
 from .sea_erosion import sea_erosion_step
 from .shallow_erosion import sample_mesh
 from .skeletal_files import save_npz
-from .talus import add_talus
+from .talus import STEEP_DEG, add_talus
 
 __all__ = ["PRESETS", "Preset", "Amplification", "NodeTables", "StepTimer", "SEA_STEPS", "MAX_PRIMITIVES"]
 
@@ -412,7 +412,7 @@ def strata(run: Amplification) -> None:
     """The erosion node over the steep faces of the DEM."""
     H, extent, R, T = run.heights, run.extent, run.R, run.T
     mesh = heightfield_mesh(H, extent, run.mesh_step)
-    steep = mesh.face_normals[:, 2] < math.cos(math.radians(40.0))
+    steep = mesh.face_normals[:, 2] < math.cos(math.radians(STEEP_DEG))
     c = mesh.triangles_center
     x0, y0, x1, y1 = extent
     inner = (c[:, 0] > x0 + 2 * R) & (c[:, 0] < x1 - 2 * R) & (c[:, 1] > y0 + 2 * R) & (c[:, 1] < y1 - 2 * R)

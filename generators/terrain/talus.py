@@ -48,7 +48,7 @@ from arches_render.npzfile import write_npz
 
 __all__ = ["Apron", "talus_apron", "add_talus", "bare_rock_masks"]
 
-#: DEM slope (degrees) from which a cell is cliff (the strata preset's cliff sampling).
+#: DEM slope (degrees) from which a cell is cliff (also the strata preset's cliff sampling).
 STEEP_DEG = 40.0
 #: Steepest ground (degrees) a fallen block rests on.
 REST_DEG = 35.0
