@@ -22,8 +22,8 @@ Blocks
 
 Sizes. ``b`` is a twentieth of the cliff height, at least three precisions (a
 block narrower than that would be noise) and at most ``MAX_BLOCK_M``; ``reach`` is
-half the cliff height, at least two DEM cells (Hoek & Bray's talus aprons reach
-about 0.3-0.6 of the cliff's height).
+half the cliff height, at least two DEM cells. Both are chosen by eye on the
+eroded mesas and a caldera, not measured from real talus.
 
 References
 ----------
@@ -36,7 +36,6 @@ Statham, I. (1976). A scree slope rockfall model. Earth Surface Processes 1(1)
 
 from __future__ import annotations
 
-import io
 import math
 from dataclasses import dataclass
 
@@ -169,10 +168,8 @@ def _clamp_margin(run):
 
 
 def _save_density(path, density):
-    buf = io.BytesIO()
-    write_npz(buf, {"density": density})
     with atomic_write(path) as f:
-        f.write(buf.getvalue())
+        write_npz(f, {"density": density})
 
 
 def add_talus(run, host: str, cliff_height: float) -> str:
