@@ -18,7 +18,8 @@ from helpers import variant
 variant()
 
 from arches_render.field import Heightfield  # noqa: E402
-from generators.terrain.far_field import MirroredRelief, far_field_mesh  # noqa: E402
+from generators.terrain.far_field import far_field_mesh  # noqa: E402
+from generators.terrain.mirrored_relief import MirroredRelief  # noqa: E402
 
 
 def _ridge_dem(n=65, width=6400.0):
@@ -85,7 +86,7 @@ def test_blur_and_interpolation_are_scipys_bit_for_bit():
     """The relief's pyramid and lookups are written in numpy (no scipy.ndimage import in a
     render process); they must be scipy's filters exactly."""
     ndimage = pytest.importorskip("scipy.ndimage")
-    from generators.terrain.far_field import bilinear, gaussian_blur
+    from generators.terrain.mirrored_relief import bilinear, gaussian_blur
     rng = np.random.default_rng(8)
     for shape in [(1, 1), (2, 9), (5, 3), (37, 53), (64, 64)]:
         H = rng.normal(size=shape) * 100.0
@@ -93,3 +94,56 @@ def test_blur_and_interpolation_are_scipys_bit_for_bit():
         v = np.concatenate([rng.uniform(-2.0, shape[0] + 2.0, 4000), np.arange(shape[0], dtype=float)])
         u = np.concatenate([rng.uniform(-2.0, shape[1] + 2.0, 4000), np.full(shape[0], shape[1] - 1.0)])
         assert np.array_equal(bilinear(H, v, u), ndimage.map_coordinates(H, [v, u], order=1, mode="nearest"))
+
+
+def _ridges_dem(n=97, width=9600.0):
+    """Mountains: crossing ridges 3.2 km apart, 600 m from trough to crest."""
+    x = np.linspace(0.0, width, n)
+    X, Y = np.meshgrid(x, x)
+    return (1500.0 + 300.0 * np.sin(2 * np.pi * X / 3200.0) * np.cos(2 * np.pi * Y / 4200.0)), (0.0, 0.0, width, width)
+
+
+def test_far_rings_keep_mountains_past_the_tile_and_in_its_corners_then_fade():
+    """Past a tile or two the rings' blur stops at the width that keeps most of the relief
+    (blur_schedule): the ridges run on, beside the sides and in the corner quadrants
+    alike (the blur that grew with distance alone made a flat plain there, and the
+    corner quadrants were a few long triangles); far past the distance where they
+    would subtend RELIEF_ANGLE, the ground is the mean height; and the mesh stays
+    within MAX_RING points a ring."""
+    from generators.terrain import far_field
+    H, extent = _ridges_dem()
+    w = extent[2]
+    mesh = far_field_mesh(Heightfield(H.astype(np.float32), extent))
+    v = mesh.vertices
+    gap = np.maximum(np.maximum(extent[0] - v[:, 0], v[:, 0] - extent[2]),
+                     np.maximum(extent[1] - v[:, 1], v[:, 1] - extent[3]))  # distance past the tile
+    band = (gap > 2.0 * w) & (gap < 5.0 * w)
+    corner = band & (v[:, 0] > extent[2]) & (v[:, 1] > extent[3]) & (np.abs(v[:, 0] - v[:, 1]) < 0.5 * gap)
+    side = band & (v[:, 0] > extent[2]) & (np.abs(v[:, 1] - 0.5 * w) < 0.5 * w)
+    for part in (side, corner):
+        assert part.sum() > 100
+        # (the DEM's deviation is 150 m; 0.7 of it is kept, sampled at random phases)
+        assert v[part, 2].std() > 0.4 * H.std(), v[part, 2].std()
+    far = gap > 20.0 * 2.0 * H.std() / far_field.RELIEF_ANGLE
+    assert far.sum() > 10 and np.allclose(v[far, 2], H.mean(), atol=1.0)
+    rings = len(far_field.ring_distances(w / 96, far_field.default_reach(extent), 1.0 + 0.7 / far_field.DETAIL))
+    assert len(v) < rings * far_field.MAX_RING + H.size
+
+
+def test_blur_schedule_grows_continuously_from_a_cell_and_a_flat_dem_stays_small():
+    from generators.terrain.far_field import DETAIL, KEEP_RELIEF, blur_schedule
+    H, extent = _ridges_dem()
+    cell = extent[2] / (H.shape[0] - 1)
+    relief = MirroredRelief(H, extent)
+    sigma = blur_schedule(relief, cell)
+    s = np.geomspace(1.0, 1e8, 2000)
+    b = np.array([sigma(x) for x in s])
+    assert np.all(np.diff(b) >= 0) and np.all(b[1:] / b[:-1] < 1.05)  # no jumps between nearby s
+    # Near the tile: detail fades with distance; a few tiles out: the ridges' own scale
+    # (a blur of 3.2 km ridges that keeps 0.7 of them is a few hundred metres).
+    keep = relief.blur_keeping(KEEP_RELIEF)
+    assert b[0] == s[0] / (2 * DETAIL) and b[np.searchsorted(s, 5 * extent[2])] == max(keep, cell) < 800.0
+    # A flat DEM: no relief to keep, the rings coarsen with distance (no million-point rings).
+    flat = np.full((33, 33), 7.0)
+    mesh = far_field_mesh(Heightfield(flat.astype(np.float32), (0.0, 0.0, 3200.0, 3200.0)))
+    assert len(mesh.vertices) < 20000 and np.allclose(mesh.vertices[:, 2], 7.0)

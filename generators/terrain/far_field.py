@@ -17,18 +17,21 @@ Rings
     From the border outwards, rings at distances ``s_0 = 0, s_1 = cell,
     s_{k+1} = (1 + 0.7 / DETAIL) s_k`` up to ``reach`` (default ``max(1e7 m, 1000 x
     the tile)``, so that a camera 1 km above the ground sees no gap below the horizon
-    wider than 1e-4 rad). Ring ``k`` is the border loop moved outwards by ``s_k``
-    (sides along their normals, corners diagonally). Its heights continue the DEM's
-    own relief (issue 34): the DEM *mirrored* across its borders (reflected about
-    the border samples, so the ground is continuous there and valleys and ridges
-    run on past the edge), low-pass filtered by a Gaussian of ``sigma = s_k / (2
-    DETAIL)`` (:class:`MirroredRelief`): detail fades with distance as a photograph's
-    does, and far away, where ``sigma`` exceeds the tile, the ground is the DEM's mean
-    height. (Before, the rings held the border's own heights smoothed along the loop:
-    from above, a square of relief on a flat plane.) Ring ``k`` keeps every ``2^j``-th
-    loop point with ``2^j spacing <= sigma`` (the corners always): the mesh holds
-    about ``DETAIL^2`` times the border's length in triangles beyond the frame,
-    whatever the DEM's area.
+    wider than 1e-4 rad). Ring 0 is the border loop; ring ``k`` is the rectangle
+    ``s_k`` outside the tile, each side sampled every ``sigma(s_k)`` (at least a cell,
+    at most :data:`MAX_RING` points a ring) and stitched to the previous ring's side
+    (:func:`_stitch`), so the corner quadrants hold relief as the sides do. Its
+    heights continue the DEM's own relief (issue 34): the DEM *mirrored* across its
+    borders (reflected about the border samples, so the ground is continuous there
+    and valleys and ridges run on past the edge), low-pass filtered by a Gaussian of
+    ``sigma(s)`` (:class:`.MirroredRelief`, :func:`blur_schedule`): ``s / (2 DETAIL)``
+    near the tile, as a photograph's detail fades with distance, but never wider
+    than the blur that keeps :data:`KEEP_RELIEF` of the DEM's height deviation, until
+    the landforms subtend :data:`RELIEF_ANGLE`; only past that does the ground fade
+    to the DEM's mean height. (Before, the blur grew with distance alone: past a
+    tile or two the mountains of a 71 km Alpine tile became a flat plain, and a
+    coast's hills a ruled horizon line. Before that, the rings held the border's own
+    heights smoothed along the loop: from above, a square of relief on a flat plane.)
 Sea
     With ``sea_level``, a flat ring at that level from the tile's border to
     ``reach`` (the water inside the tile is the scene's own, e.g. amplify's
@@ -59,9 +62,25 @@ from arches_render.field import Heightfield
 from arches_render.mesh.polygonize import TriangleMesh
 from arches_render.mesh.triangles import face_normals, merged_vertices, vertex_normals
 
-__all__ = ["FarField", "MirroredRelief", "far_field_mesh", "sea_ring_mesh", "ring_distances", "parse_far_field", "default_reach"]
+from .mirrored_relief import MirroredRelief
+
+__all__ = ["FarField", "blur_schedule", "far_field_mesh", "sea_ring_mesh", "ring_distances", "parse_far_field", "default_reach"]
 
 _GROWTH = 1.35  # ring distance ratio (the sea's rings)
+
+#: The share of the DEM's height deviation the far rings keep (:func:`blur_schedule`): at
+#: 0.7 the Alps' ridges (a blur of 3.7 km on Aletsch) and the Santa Cruz range's hills
+#: (1.9 km, Devil's Slide) run on to the horizon; the rings blurred into the mean height
+#: showed a flat plain there, and its horizon as a ruled line across the frame.
+KEEP_RELIEF = 0.7
+
+#: Angle (radians) below which the far rings' landforms no longer show: twice the
+#: DEM's height deviation seen from this far away subtends about three pixels of a
+#: 1280-pixel, 55 degree frame.
+RELIEF_ANGLE = 2e-3
+
+#: Most points on one ring (past it the ring is sampled, and blurred, more coarsely).
+MAX_RING = 1024
 
 #: Detail of the ground rings: their relief is blurred by ``sigma = s / (2 DETAIL)`` at
 #: distance ``s`` from the border, sampled every ``s / (2 DETAIL)`` along the rings, with
@@ -89,162 +108,81 @@ def _loop(nx, ny):
     return loop, corners
 
 
-def _outward(loop, nx, ny):
-    """Offset direction of each loop point: side normals, diagonals at the corners."""
-    j, i = loop[:, 0], loop[:, 1]
-    out = np.zeros((len(loop), 2))
-    out[j == 0, 1] = -1.0
-    out[j == ny - 1, 1] = 1.0
-    out[i == 0, 0] = -1.0
-    out[i == nx - 1, 0] = 1.0
-    return out
+def blur_schedule(relief, cell):
+    """The ground rings' blur as a function of the distance ``s`` from the border.
 
-
-class MirroredRelief:
-    """Heights of a DEM mirrored across its borders and blurred by a Gaussian of any width.
-
-    The DEM is extended by reflection about its border samples (period ``2 (n - 1)``
-    samples per axis: the extension is continuous and repeats the tile's character,
-    not a flat plane). A pyramid of the extension, each level blurred by a Gaussian of
-    one of its samples and halved (:func:`gaussian_blur`, mirrored: the same
-    reflection), holds blurs of about ``2^j`` samples; a query between two levels
-    interpolates linearly in ``sigma`` (:func:`bilinear`), and beyond the coarsest
-    level the heights fade to the DEM's mean over one octave.
+    ``s / (2 DETAIL)`` near the tile (detail fades with distance); at most ``keep``,
+    the widest blur that keeps :data:`KEEP_RELIEF` of the DEM's height deviation
+    (:meth:`.MirroredRelief.blur_keeping`), up to ``far`` = twice that deviation over
+    :data:`RELIEF_ANGLE` (where the landforms shrink to a few pixels); beyond,
+    ``keep (s / far)^2``, which fades to the mean height within a decade of distance
+    (rings sampled as coarsely: their points fall as ``1 / s``). At least one DEM cell.
 
     Parameters
     ----------
-    H : numpy.ndarray
-        ``(ny, nx)`` heights.
-    extent : sequence of 4 floats
-        ``(x0, y0, x1, y1)`` of the samples' corners (the tile).
+    relief : MirroredRelief
+    cell : float
+        The DEM's cell (metres).
+
+    Returns
+    -------
+    callable
+        ``sigma(s)`` in metres.
     """
+    keep = max(relief.blur_keeping(KEEP_RELIEF), cell)
+    near = 2.0 * DETAIL * keep
+    far = max(2.0 * relief.relief / RELIEF_ANGLE, near)
 
-    def __init__(self, H, extent):
-        H = np.asarray(H, np.float64)
-        self.shape = H.shape
-        x0, y0, x1, y1 = (float(v) for v in extent)
-        ny, nx = H.shape
-        self.origin = (x0, y0)
-        self.spacing = ((x1 - x0) / max(nx - 1, 1), (y1 - y0) / max(ny - 1, 1))
-        # Blur of each level in level-0 samples (a blur of one sample of level j is 2^j of
-        # level 0); the levels themselves are built when first asked for (an unblurred
-        # query, as the overview camera's, needs none).
-        self.levels, self.sigmas = [H], [0.0]
-        size = min(H.shape)
-        while size > 2:
-            size = (size + 1) // 2
-            self.sigmas.append(math.sqrt(self.sigmas[-1] ** 2 + 4.0 ** (len(self.sigmas) - 1)))
-        self.mean = float(H.mean())
+    def sigma(s):
+        return s / (2.0 * DETAIL) if s <= near else (keep if s <= far else keep * (s / far) ** 2)
 
-    def _level(self, j):
-        """Level ``j`` of the pyramid (built up to it on first use)."""
-        while len(self.levels) <= j:
-            self.levels.append(gaussian_blur(self.levels[-1])[::2, ::2])
-        return self.levels[j]
-
-    def _mirror(self, x, y):
-        """Level-0 sample coordinates ``(u, v)`` of world points, reflected into the tile."""
-        out = []
-        for c, o, d, n in ((x, self.origin[0], self.spacing[0], self.shape[1]),
-                           (y, self.origin[1], self.spacing[1], self.shape[0])):
-            period = 2.0 * max(n - 1, 1)
-            u = np.mod((np.asarray(c, np.float64) - o) / d, period)
-            out.append(np.where(u > n - 1, period - u, u))
-        return out
-
-    def heights(self, x, y, sigma):
-        """Heights at world points ``(x, y)`` (arrays) blurred by ``sigma`` metres (a float).
-
-        Returns
-        -------
-        numpy.ndarray
-        """
-        u, v = self._mirror(x, y)
-        s = max(float(sigma), 0.0) / min(self.spacing)  # in level-0 samples
-
-        def level(j):
-            scale = 0.5 ** j
-            return bilinear(self._level(j), v * scale, u * scale)
-
-        top = len(self.sigmas) - 1
-        if s >= self.sigmas[top]:
-            # Past the coarsest level: to the mean over one octave of sigma.
-            w = min(math.log2(s / self.sigmas[top]) if self.sigmas[top] > 0 else 1.0, 1.0)
-            return (1.0 - w) * level(top) + w * self.mean
-        j = int(np.searchsorted(self.sigmas, s, side="right")) - 1
-        w = (s - self.sigmas[j]) / (self.sigmas[j + 1] - self.sigmas[j])
-        return level(j) if w <= 0.0 else (1.0 - w) * level(j) + w * level(j + 1)
+    return sigma
 
 
-def gaussian_blur(H: np.ndarray, radius: int = 4) -> np.ndarray:
-    """``H`` blurred by a Gaussian of one sample, truncated at ``radius`` samples, each axis
-    mirrored about its end samples (``d c b | a b c d | c b a``).
-
-    What ``scipy.ndimage.gaussian_filter(H, 1.0, mode="mirror")`` returns, bit for bit
-    (the same normalized taps, summed in the same order: the centre, then the pairs
-    from the outermost in), in numpy: importing ``scipy.ndimage`` took 0.17 s of every
-    render process with a far field.
-    """
-    x = np.arange(-radius, radius + 1, dtype=np.float64)
-    taps = np.exp(-0.5 * x ** 2)
-    taps = (taps / taps.sum())[radius:]  # taps[k]: weight at distance k
-    out = np.asarray(H, np.float64)
-    for axis in range(out.ndim):
-        pad = [(0, 0)] * out.ndim
-        pad[axis] = (radius, radius)
-        padded = np.pad(out, pad, mode="reflect")  # numpy's "reflect" is scipy's "mirror"
-        n = out.shape[axis]
-
-        def shifted(k):
-            index = [slice(None)] * out.ndim
-            index[axis] = slice(radius + k, radius + k + n)
-            return padded[tuple(index)]
-
-        acc = shifted(0) * taps[0]
-        for k in range(radius, 0, -1):
-            acc = acc + (shifted(-k) + shifted(k)) * taps[k]
-        out = acc
-    return out
+def _square_ring(lo, hi, spacing):
+    """A closed loop around the rectangle ``lo``-``hi`` (counter-clockwise from ``lo``), each
+    side cut into segments of at most ``spacing``: ``(points (n, 2), sides)``, ``sides``
+    four ``(indices, parameters)`` from corner to corner (the last index of a side is the
+    next side's first; parameters from 0 to 1 along the side)."""
+    corners = np.array([lo, (hi[0], lo[1]), hi, (lo[0], hi[1])], np.float64)
+    pts, sides, start = [], [], 0
+    for q in range(4):
+        a, b = corners[q], corners[(q + 1) % 4]
+        n = max(1, int(math.ceil(np.linalg.norm(b - a) / spacing)))
+        t = np.arange(n + 1) / n
+        pts.append(a + t[:-1, None] * (b - a))
+        sides.append((start + np.arange(n + 1), t))
+        start += n
+    pts = np.concatenate(pts)
+    sides[-1][0][-1] = 0  # the loop closes at its first corner
+    return pts, sides
 
 
-def bilinear(A: np.ndarray, v, u) -> np.ndarray:
-    """``A`` interpolated bilinearly at fractional rows ``v`` and columns ``u``, samples
-    beyond the edges repeating the edge's: ``scipy.ndimage.map_coordinates(A, [v, u],
-    order=1, mode="nearest")`` bit for bit (the weights of the unclamped coordinates, the
-    four corners summed in its order), in numpy (see :func:`gaussian_blur` for why)."""
-    v, u = np.asarray(v, np.float64), np.asarray(u, np.float64)
-    ny, nx = A.shape
-    j0, i0 = np.floor(v).astype(np.int64), np.floor(u).astype(np.int64)
-    fy, fx = v - j0, u - i0
-    rows = (np.clip(j0, 0, ny - 1), np.clip(j0 + 1, 0, ny - 1))
-    cols = (np.clip(i0, 0, nx - 1), np.clip(i0 + 1, 0, nx - 1))
-    wy, wx = (1.0 - fy, fy), (1.0 - fx, fx)
-    out = 0.0
-    for a in range(2):
-        for b in range(2):
-            out = out + A[rows[a], cols[b]] * wy[a] * wx[b]
-    return np.asarray(out, np.float64)
+def _loop_sides(corners, n):
+    """The four sides of the border loop (``n`` points, ``corners`` their positions), as
+    :func:`_square_ring` gives them."""
+    ends = list(corners) + [n]
+    sides = []
+    for q in range(4):
+        k = np.arange(ends[q], ends[q + 1] + 1)
+        sides.append((k % n, (k - ends[q]) / (ends[q + 1] - ends[q])))
+    return sides
 
 
-def _zip(a, b, off_a, off_b):
-    """Triangles between two closed rings of loop indices: ``a`` and its subset ``b`` (both sorted).
-
-    Each segment ``b_j -> b_j+1`` of the coarse ring faces the run of fine points
-    from ``b_j`` to ``b_j+1``: a fan to ``b_j`` over the first half of the run, to
-    ``b_j+1`` over the second, and one triangle joining the two apexes.
-    """
-    tris = []
-    pos = {int(v): k for k, v in enumerate(a)}
-    na, nb = len(a), len(b)
-    for jb in range(nb):
-        k0 = pos[int(b[jb])]
-        k1 = pos[int(b[jb + 1])] if jb + 1 < nb else na
-        mid = (k0 + k1 + 1) // 2
-        for k in range(k0, k1):
-            apex = jb if k < mid else (jb + 1) % nb
-            tris.append((off_a + k % na, off_a + (k + 1) % na, off_b + apex))
-        tris.append((off_a + mid % na, off_b + (jb + 1) % nb, off_b + jb))
-    return tris
+def _stitch(inner, outer):
+    """Triangles between two polylines from one end to the other, each ``(indices,
+    parameters)`` with parameters rising from 0 to 1: the advancing front takes the
+    nearer next point of the two, so no triangle spans more than a step of each."""
+    (ia, pa), (ib, pb) = inner, outer
+    events = np.concatenate([pa[1:], pb[1:]])
+    is_a = np.concatenate([np.ones(len(pa) - 1, bool), np.zeros(len(pb) - 1, bool)])
+    order = np.argsort(events, kind="stable")  # ties: the inner ring's point first
+    is_a = is_a[order]
+    na = np.cumsum(is_a) - is_a  # inner points passed before each event
+    nb = np.cumsum(~is_a) - ~is_a
+    a0, b0 = ia[na], ib[nb]
+    third = np.where(is_a, ia[np.minimum(na + 1, len(ia) - 1)], ib[np.minimum(nb + 1, len(ib) - 1)])
+    return np.column_stack([a0, third, b0])
 
 
 def far_field_mesh(node, reach=None):
@@ -293,28 +231,25 @@ def far_field_mesh(node, reach=None):
         a, b, c, d = vid[cj, ci], vid[cj, ci + 1], vid[cj + 1, ci], vid[cj + 1, ci + 1]
         F += [np.column_stack([a, b, d]), np.column_stack([a, d, c])]
 
-    # Rings from the border outwards.
+    # Rings from the border outwards: rectangles around the tile (their corners too hold
+    # relief), sides sampled at the ring's blur and stitched to the previous ring's.
     loop, corners = _loop(nx, ny)
-    out = _outward(loop, nx, ny)
     border = (H + lift)[loop[:, 0], loop[:, 1]]  # the frame's border vertices, shared exactly
-    xy = np.column_stack([x0 + loop[:, 1] * dx, y0 + loop[:, 0] * dy])
-    spacing = min(dx, dy)
+    V.append(np.column_stack([x0 + loop[:, 1] * dx, y0 + loop[:, 0] * dy, border]))
+    off = sum(len(v) for v in V[:-1])
+    prev = [(off + k, t) for k, t in _loop_sides(corners, len(loop))]
+    off += len(loop)
     relief = MirroredRelief(H, node.extent)
-    s = ring_distances(max(dx, dy), reach, 1.0 + 0.7 / DETAIL)
-    off = sum(len(v) for v in V)
-    prev = None
-    for sk in s:
-        step = 1 << max(0, int(math.floor(math.log2(max(1.0, sk / (2.0 * DETAIL * spacing))))))
-        keep = np.union1d(np.arange(0, len(loop), step), corners)
-        p = xy[keep] + sk * out[keep]
-        h = border[keep] if sk == 0.0 else relief.heights(p[:, 0], p[:, 1], 0.5 * sk / DETAIL)
-        V.append(np.column_stack([p, h]))
-        if prev is not None:
-            pkeep, poff = prev
-            # The coarser ring is a subset of the finer one (steps are powers of two).
-            F.append(np.array(_zip(pkeep, keep, poff, off), np.int64))
-        prev = (keep, off)
-        off += len(keep)
+    sigma = blur_schedule(relief, max(dx, dy))
+    for sk in ring_distances(max(dx, dy), reach, 1.0 + 0.7 / DETAIL)[1:]:
+        lo, hi = (x0 - sk, y0 - sk), (x1 + sk, y1 + sk)
+        # Along a ring: at least a cell, at most MAX_RING points (then blurred as sampled).
+        spacing = max(sigma(sk), 2.0 * ((hi[0] - lo[0]) + (hi[1] - lo[1])) / MAX_RING, min(dx, dy))
+        p, sides = _square_ring(lo, hi, spacing)
+        V.append(np.column_stack([p, relief.heights(p[:, 0], p[:, 1], spacing)]))
+        ring = [(off + k, t) for k, t in sides]
+        F += [_stitch(a, b) for a, b in zip(prev, ring)]
+        prev, off = ring, off + len(p)
     # Merged vertices (frame and first ring share theirs) and upward faces, so that
     # vertex normals are smooth across the seams.
     vertices, faces = merged_vertices(np.concatenate(V), np.concatenate(F))

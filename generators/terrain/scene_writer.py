@@ -43,7 +43,7 @@ import numpy as np
 
 from arches_render.materials.masks import terrain_look
 
-from .far_field import MirroredRelief
+from .mirrored_relief import MirroredRelief
 from .presets import PRESETS
 
 __all__ = ["toml_text", "frame_camera", "landscape_material", "sun_for", "scene_document", "LANDFORM_NAMES"]
