@@ -147,3 +147,22 @@ def test_blur_schedule_grows_continuously_from_a_cell_and_a_flat_dem_stays_small
     flat = np.full((33, 33), 7.0)
     mesh = far_field_mesh(Heightfield(flat.astype(np.float32), (0.0, 0.0, 3200.0, 3200.0)))
     assert len(mesh.vertices) < 20000 and np.allclose(mesh.vertices[:, 2], 7.0)
+
+
+@pytest.mark.parametrize("shape, extent", [((2, 2), (0.0, 0.0, 10.0, 10.0)), ((7, 40), (0.0, 0.0, 3900.0, 600.0)),
+                                           ((64, 64), (-1e5, -1e5, 1e5, 1e5))])
+def test_rings_cover_the_ground_around_the_tile_once(shape, extent):
+    """The stitched rings tile the plane from the border to the reach: their triangles'
+    projected areas sum to the annulus's exactly (a hole or an overlap would not), all face
+    up and none is degenerate, for tiny, narrow and wide tiles."""
+    H = (np.random.default_rng(0).normal(size=shape) * 10.0).astype(np.float32)
+    mesh = far_field_mesh(Heightfield(H, extent))
+    v, f = mesh.vertices, mesh.faces
+    e1, e2 = v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]
+    up = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]  # twice the signed projected area
+    x0, y0, x1, y1 = extent
+    reach = v[:, 0].max() - x1
+    annulus = (x1 - x0 + 2 * reach) * (y1 - y0 + 2 * reach) - (x1 - x0) * (y1 - y0)
+    assert np.all(up > 0)
+    # (float64 sums of ~1e5 areas up to ~1e14 m2: a part in 1e9)
+    assert abs(0.5 * up.sum() / annulus - 1.0) < 1e-9
