@@ -318,6 +318,30 @@ def test_fallen_blocks_rest_on_gentle_ground_and_thin_out_with_density(tiles):
             presence_table(tile, host, *args, 0.0, density=bad)
 
 
+def test_resting_blocks_touch_the_host_with_three_anchors(tiles):
+    """``contact``: of the copies the majority rule keeps over the cliff's flat top (a
+    distance range reaching 3 m into the air keeps blocks hovering over it), only those
+    with at least three anchors within ``contact`` of the host or inside it stay: a
+    subset, which drops every hovering copy and keeps some."""
+    from arches_render.generators.blocks.replication import CONTACTS
+    host, tile = _cliff(), tiles["equidimensional"]
+    args = ([-8, -7, 0], [3, 7, 9], (-3.0, 1.0), 0.0)
+    loose = presence_table(tile, host, *args, max_slope=30.0)
+    resting = presence_table(tile, host, *args, max_slope=30.0, contact=0.1)
+
+    def touching(p):
+        A = tile.anchors[p.blocks].astype(np.float64) + (p.cells * tile.size)[:, None, :]
+        f = F.evaluate(host, A.reshape(-1, 3)).astype(np.float64).reshape(A.shape[:2])
+        return (f >= -0.1).sum(-1)
+
+    assert np.all(loose.dense() >= resting.dense())
+    assert len(resting.blocks) > 5 and np.all(touching(resting) >= CONTACTS)
+    assert np.sum(touching(loose) < CONTACTS) > 5          # hovering copies were there to drop
+    assert len(resting.blocks) == np.sum(touching(loose) >= CONTACTS)
+    with pytest.raises(ValueError, match="contact"):
+        presence_table(tile, host, *args, contact=-1.0)
+
+
 def test_presence_by_resistance(tiles):
     host, tile = _cliff(), tiles["prismatic"]
     args = ([-8, -7, 0], [3, 7, 7], (-1.0, 1.0), 50.0)
@@ -420,9 +444,9 @@ def test_bad_blocks_keys_name_the_key(tmp_path, monkeypatch, edit, key):
     assert "nodes.b." in str(err.value)
 
 
-def test_scene_density_and_max_slope_keys(tmp_path, monkeypatch):
-    """``density`` (an .npz grid over the region) and ``max_slope`` reach the presence
-    table; bad values name their key."""
+def test_scene_density_max_slope_and_contact_keys(tmp_path, monkeypatch):
+    """``density`` (an .npz grid over the region), ``max_slope`` and ``contact`` reach the
+    presence table; bad values name their key."""
     from arches_render.npzfile import write_npz
     from arches_render.scene import SceneError
     monkeypatch.setenv("ARCHES_RENDER_CACHE", str(tmp_path / "cache"))
@@ -437,8 +461,13 @@ def test_scene_density_and_max_slope_keys(tmp_path, monkeypatch):
     # The host box's top faces up (flat); its side walls do not: max_slope 30 keeps fewer.
     flat = _load(MINI.replace("seed = 1", "seed = 1\nmin_slope = 0.0\nmax_slope = 30.0"), tmp_path)
     assert 0 < flat.field.children[1].n_present < base.n_present
+    # contact: the blocks that rest on the host, a subset.
+    rest = _load(MINI.replace("seed = 1", "seed = 1\nmin_slope = 0.0\ncontact = 0.05"), tmp_path)
+    assert np.all(base.presence.dense() >= rest.field.children[1].presence.dense())
+    assert 0 < rest.field.children[1].n_present < base.n_present
     for extra, key in (('density = "bad.npz"', "density"), ('density = "none.npz"', "density"),
-                       ("max_slope = 40.0", "max_slope")):   # below min_slope's default 60
+                       ("max_slope = 40.0", "max_slope"),   # below min_slope's default 60
+                       ("contact = -1.0", "contact")):
         with pytest.raises(SceneError) as err:
             _load(MINI.replace("seed = 1", "seed = 1\n" + extra), tmp_path)
         assert f"nodes.b.{key}" in str(err.value), str(err.value)

@@ -84,6 +84,13 @@ def test_strata_fallen_blocks_rest_at_the_foot_of_the_cliffs_unless_refused(tmp_
     # blocks' centres lie within a block or two of it, not up the wall or in the air.
     depth = evaluate(talus.children[0], c)
     assert np.all(np.abs(depth) < 2.0 * res.tables["talus"]["spacing"]), np.abs(depth).max()
+    # None hovers over a hollow: every block has three anchors within CONTACT b of the
+    # ground or in it (the majority of anchors in the distance range alone let blocks
+    # float up to 0.3 b above it).
+    from arches_render.generators.terrain.talus import CONTACT
+    A = blocks.tile.anchors[blocks.presence.blocks] + (blocks.presence.cells * blocks.tile.size)[:, None, :]
+    f = evaluate(talus.children[0], A.reshape(-1, 3)).reshape(A.shape[:2])
+    assert np.all((f >= -CONTACT * res.tables["talus"]["spacing"]).sum(-1) >= 3)
     again = amplify(H, CELL, "strata", 4, tmp_path / "again")
     b2 = again.root.children[0].children[1]
     assert np.array_equal(b2.presence.cells, blocks.presence.cells)

@@ -27,8 +27,10 @@ blocks                 host (node name or inline table), [structure = "equidimen
                        ``density`` (ny, nx) in [0, 1] spans the region's x, y, row 0
                        south: each copy is kept with the probability at its centroid,
                        drawn with ``seed``), [resistance] (number or node),
-                       [resistance_range = [-inf, inf]], [protrusion] >= 0 (clip the
-                       blocks to the host grown by it; none: max(host, t))
+                       [resistance_range = [-inf, inf]], [contact] >= 0 (blocks rest
+                       on the host: 3 anchors within it of the host or inside; none: no
+                       test), [protrusion] >= 0 (clip the blocks to the host grown by it;
+                       none: max(host, t))
 =====================  ==================================================================
 
 The node is ``max(host, t)`` with ``t`` the replicated blocks (see
@@ -152,6 +154,7 @@ def _blocks(t, ctx):
                          distance_range=_range(t, "distance_range", [-1.0, 1.0]),
                          min_slope=min_slope, max_slope=max_slope, density=density,
                          resistance=resistance, resistance_range=res_range,
+                         contact=t.number("contact", None, lo=0.0),
                          protrusion=t.number("protrusion", None, lo=0.0),
                          smoothness=t.number("smoothness", 0.25, lo=0.0, lo_open=True, hi=5.0),
                          warp=t.number("warp", 0.04, lo=0.0, hi=2.0),

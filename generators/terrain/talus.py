@@ -17,8 +17,9 @@ Blocks
     carved terrain: equidimensional blocks ``b`` across, a block copy kept when most
     of its anchors lie within ``[-0.8 b, 0.15 b]`` of the ground (resting on it,
     partly buried), on ground facing up and gentler than ``REST_DEG`` (the angle of
-    repose of coarse scree, not a wall or a roof), and its draw falls below the
-    apron's density at its centroid.
+    repose of coarse scree, not a wall or a roof), resting on it (three anchors within
+    ``CONTACT b`` of the ground or in it: without, blocks hung over the apron's
+    hollows), and its draw falls below the apron's density at its centroid.
 
 Sizes. ``b`` is a twentieth of the cliff height, at least three precisions (a
 block narrower than that would be noise) and at most ``MAX_BLOCK_M``; ``reach`` is
@@ -53,6 +54,10 @@ STEEP_DEG = 40.0
 REST_DEG = 35.0
 #: Probability of keeping a block copy at the wall's foot.
 PEAK = 0.3
+#: How close to the ground (in block sizes) a resting block's three lowest anchors lie
+#: (the blocks' ``contact``): its rounded edges (``smoothness`` 0.08 b) stand off the
+#: hull's vertices by about that much.
+CONTACT = 0.1
 #: Largest block (m).
 MAX_BLOCK_M = 40.0
 #: Side of the density grid at most (cells; a larger DEM's apron is max-pooled).
@@ -201,7 +206,8 @@ def add_talus(run, host: str, cliff_height: float) -> str:
         "tile_size": 4.0 * block, "spacing": block, "seed": seed,
         "smoothness": 0.08 * block, "warp": 0.02 * block, "warp_wavelength": 0.3 * block,
         "region": list(apron.box), "distance_range": [-0.8 * block, 0.15 * block],
-        "min_slope": 0.0, "max_slope": REST_DEG, "density": rel, "margin": _clamp_margin(run)})
+        "min_slope": 0.0, "max_slope": REST_DEG, "contact": CONTACT * block, "density": rel,
+        "margin": _clamp_margin(run)})
     n = int(node.children[1].n_present)
     run.stats["fallen_blocks"] = n
     # The material's cavity term samples the field in the air around a point as a
