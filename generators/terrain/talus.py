@@ -52,8 +52,10 @@ __all__ = ["Apron", "talus_apron", "add_talus", "bare_rock_masks"]
 STEEP_DEG = 40.0
 #: Steepest ground (degrees) a fallen block rests on.
 REST_DEG = 35.0
-#: Probability of keeping a block copy at the wall's foot.
-PEAK = 0.3
+#: Probability of keeping a block copy at the wall's foot (0.3 before blocks had to rest
+#: on the ground, which drops about half of the copies: 0.6 keeps the apron as dense,
+#: 4188 blocks on the eroded mesas against 4592 with the hovering ones).
+PEAK = 0.6
 #: How close to the ground (in block sizes) a resting block's three lowest anchors lie
 #: (the blocks' ``contact``): its rounded edges (``smoothness`` 0.08 b) stand off the
 #: hull's vertices by about that much.
