@@ -278,8 +278,18 @@ SUN_CLEAR = 60.0
 #: A relief (m) from which a DEM is dressed as high mountains (:func:`landscape_material`).
 ALPINE_RELIEF = 1500.0
 
+#: The rock texture's tile (m) per metre of the DEM's cliff height, and its range
+#: (:func:`landscape_material`). The ``terrain`` preset's 6 m tile, made for a 200 m
+#: scene, drew 1-2 m cobbles on sea cliffs 30-100 m high: a dry-stone wall. At a fifth
+#: of the cliff's height the same texture reads as a jointed rock face (Devil's Slide,
+#: 98 m: 20 m; the eroded coast, 80 m: 16 m), and a sandstone canyon's walls, where
+#: strata colours and the detail layer dominate, look the same.
+ROCK_TILE_PER_CLIFF = 0.2
+ROCK_TILE_RANGE = (6.0, 30.0)
 
-def landscape_material(zlo, zhi, sea_level=None, geology=None, box=None, preset=None, cell=1.0):
+
+def landscape_material(zlo, zhi, sea_level=None, geology=None, box=None, preset=None, cell=1.0,
+                       cliff_height=None):
     """The ``terrain`` triplanar preset with layer heights fitted to ``[zlo, zhi]``.
 
     Sand covers low flats (up to 12 % of the relief, or a little above sea level),
@@ -292,7 +302,8 @@ def landscape_material(zlo, zhi, sea_level=None, geology=None, box=None, preset=
     built resistance node of the scene's ``[nodes.geology]``) and ``box`` (the rock's
     volume), the rock takes the strata colours of the preset's palette
     (:data:`STRATA_PALETTE`), the cavity term (reach two cells) and, with
-    ``sea_level``, a wet band.
+    ``sea_level``, a wet band. With ``cliff_height`` (m) the rock texture's tile is
+    :data:`ROCK_TILE_PER_CLIFF` of it, within :data:`ROCK_TILE_RANGE`.
     """
     relief = max(zhi - zlo, 1e-3)
     # (the relief of the land: a deep sea floor makes no mountain)
@@ -306,6 +317,9 @@ def landscape_material(zlo, zhi, sea_level=None, geology=None, box=None, preset=
         "snow.height_min": zhi - (0.25 if alpine else 0.05) * land if land > 300 else zhi + relief,
         "snow.height_soft": 0.02 * relief,
     }
+    if cliff_height:
+        lo, hi = ROCK_TILE_RANGE
+        over["rock.scale"] = float(min(max(ROCK_TILE_PER_CLIFF * cliff_height, lo), hi))
     # Tiling without repetition and the detail layer come with the preset (issue 24).
     mat = {"type": "triplanar", "preset": "terrain", "overrides": over}
     if geology is not None:
@@ -384,7 +398,8 @@ def scene_document(result, name, work_dir, progress=None, close=3):
         "cameras": cameras,
         "lights": [sun_for(sun_views(shots[0] if shots else None))],
         "materials": {"landscape": landscape_material(zlo, zhi, result.sea_level, *_geology(result),
-                                                      preset=result.preset, cell=stats["cell_size"])},
+                                                      preset=result.preset, cell=stats["cell_size"],
+                                                      cliff_height=result.scales.get("cliff_height_m"))},
         "field": {"root": "world", "material": "landscape"},
     }
     look = stats.get("fallen_blocks_look")
