@@ -75,6 +75,12 @@ def test_auto_coast_gets_sea_reaching_the_horizon(tmp_path, capsys):
     assert "Preset sea:" in head and "reaching the border" in head, head
     text = out.read_text()
     assert "[[far_field]]" in text and "sea_level = 0.0" in text
+    # The sea cliffs' rock texture follows the cliffs the header measured (a fifth, 6-30 m).
+    import re
+    import tomllib
+    cliff = float(re.search(r"cliff_height ([\d.e+]+)", head).group(1))
+    rock = tomllib.loads(text)["materials"]["landscape"]["overrides"]["rock.scale"]
+    assert rock == pytest.approx(min(max(0.2 * cliff, 6.0), 30.0), rel=1e-2), (rock, cliff)
     # Rendered: no pixel below the horizon sees past the sea, no prism wall (the close shots face
     # the cliffs from the water: their top rows may be rock).
     desc = load_scene(out)
@@ -345,12 +351,6 @@ def test_caldera_gets_cliffs_in_its_walls_and_a_lake_on_its_floor(tmp_path, caps
     r = np.hypot(*np.meshgrid(x, x))
     water = trimesh.load(next(tmp_path.glob("caldera*.water.ply")), process=False)
     assert water.vertices[:, 2].max() < H[(r > 1300) & (r < 1500)].min() - 200.0
-    # The rock texture follows the cliffs the header measured (a fifth, within 6-30 m).
-    import re
-    import tomllib
-    cliff = float(re.search(r"cliff_height ([\d.e+]+)", "\n".join(_header(out))).group(1))
-    rock = tomllib.loads(out.read_text())["materials"]["landscape"]["overrides"]["rock.scale"]
-    assert rock == pytest.approx(min(max(0.2 * cliff, 6.0), 30.0), rel=1e-2), (rock, cliff)
     desc = load_scene(out)
     _check_shots(desc, _render_all_cameras(desc))
 
@@ -491,12 +491,17 @@ def test_snow_and_rock_follow_the_lands_rise_not_the_sea_floor():
     assert ALPINE_RELIEF == 1500.0
 
 
-def test_rock_texture_grows_with_the_cliffs():
-    """The rock texture's tile is a fifth of the DEM's cliff height, within 6-30 m: sea cliffs
-    98 m high get 19.6 m (the preset's 6 m drew a dry-stone wall of cobbles on them), a
-    23 m crater rim and Alpine walls are held to the range, no cliff keeps the preset's."""
+def test_rock_texture_of_sea_cliffs_grows_with_them():
+    """On the sea preset the rock texture's tile is a fifth of the DEM's cliff height,
+    within 6-30 m: sea cliffs 98 m high get 19.6 m (the preset's 6 m drew a dry-stone wall
+    of cobbles on them), low and very high ones are held to the range, no cliff keeps the
+    preset's tile, and so do the other presets (shot from farther, where it averages out)."""
     from arches_render.generators.terrain.scene_writer import landscape_material
-    tile = lambda h: landscape_material(0.0, 500.0, cliff_height=h)["overrides"].get("rock.scale")  # noqa: E731
+
+    def tile(h, preset="sea"):
+        return landscape_material(0.0, 500.0, 0.0, preset=preset, cliff_height=h)["overrides"].get("rock.scale")
+
     assert tile(98.0) == pytest.approx(19.6) and tile(80.0) == pytest.approx(16.0)
     assert tile(23.4) == 6.0 and tile(608.0) == 30.0
     assert tile(None) is None and tile(0.0) is None
+    assert all(tile(98.0, p) is None for p in ("river", "karst", "hoodoos", "strata"))

@@ -278,12 +278,14 @@ SUN_CLEAR = 60.0
 #: A relief (m) from which a DEM is dressed as high mountains (:func:`landscape_material`).
 ALPINE_RELIEF = 1500.0
 
-#: The rock texture's tile (m) per metre of the DEM's cliff height, and its range
-#: (:func:`landscape_material`). The ``terrain`` preset's 6 m tile, made for a 200 m
-#: scene, drew 1-2 m cobbles on sea cliffs 30-100 m high: a dry-stone wall. At a fifth
-#: of the cliff's height the same texture reads as a jointed rock face (Devil's Slide,
-#: 98 m: 20 m; the eroded coast, 80 m: 16 m), and a sandstone canyon's walls, where
-#: strata colours and the detail layer dominate, look the same.
+#: The rock texture's tile (m) per metre of the DEM's cliff height on sea cliffs, and
+#: its range (:func:`landscape_material`). The ``terrain`` preset's 6 m tile, made for a
+#: 200 m scene, drew 1-2 m cobbles on sea cliffs 30-100 m high, seen from the sea-cave
+#: shots 20-50 m away: a dry-stone wall. At a fifth of the cliff's height the same
+#: texture reads as a jointed rock face (Devil's Slide, 98 m: 20 m; the eroded coast,
+#: 80 m: 16 m). Not for the other presets: their shots stand farther from the walls,
+#: where the 6 m tile averages out, and a larger one showed its gravel (the eroded
+#: mesas' sandstone at 22 m read as conglomerate, Aletsch's blobs at 30 m as pebbles).
 ROCK_TILE_PER_CLIFF = 0.2
 ROCK_TILE_RANGE = (6.0, 30.0)
 
@@ -302,8 +304,9 @@ def landscape_material(zlo, zhi, sea_level=None, geology=None, box=None, preset=
     built resistance node of the scene's ``[nodes.geology]``) and ``box`` (the rock's
     volume), the rock takes the strata colours of the preset's palette
     (:data:`STRATA_PALETTE`), the cavity term (reach two cells) and, with
-    ``sea_level``, a wet band. With ``cliff_height`` (m) the rock texture's tile is
-    :data:`ROCK_TILE_PER_CLIFF` of it, within :data:`ROCK_TILE_RANGE`.
+    ``sea_level``, a wet band. With ``cliff_height`` (m) and the ``sea`` preset the
+    rock texture's tile is :data:`ROCK_TILE_PER_CLIFF` of it, within
+    :data:`ROCK_TILE_RANGE`.
     """
     relief = max(zhi - zlo, 1e-3)
     # (the relief of the land: a deep sea floor makes no mountain)
@@ -317,7 +320,7 @@ def landscape_material(zlo, zhi, sea_level=None, geology=None, box=None, preset=
         "snow.height_min": zhi - (0.25 if alpine else 0.05) * land if land > 300 else zhi + relief,
         "snow.height_soft": 0.02 * relief,
     }
-    if cliff_height:
+    if cliff_height and preset == "sea":
         lo, hi = ROCK_TILE_RANGE
         over["rock.scale"] = float(min(max(ROCK_TILE_PER_CLIFF * cliff_height, lo), hi))
     # Tiling without repetition and the detail layer come with the preset (issue 24).
