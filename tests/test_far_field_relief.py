@@ -166,3 +166,19 @@ def test_rings_cover_the_ground_around_the_tile_once(shape, extent):
     assert np.all(up > 0)
     # (float64 sums of ~1e5 areas up to ~1e14 m2: a part in 1e9)
     assert abs(0.5 * up.sum() / annulus - 1.0) < 1e-9
+
+
+def test_the_first_rings_of_a_large_dem_are_as_fine_as_its_border():
+    """Next to the tile the rings keep a point a cell, as the border loop does, however
+    large the DEM (MAX_RING caps only rings past a quarter tile): a 1200^2 DEM's ring one
+    cell out is sampled about a cell apart along its side."""
+    from generators.terrain import far_field
+    n, cell = 1200, 10.0
+    H = np.random.default_rng(3).normal(size=(n, n)).astype(np.float32)
+    w = (n - 1) * cell
+    mesh = far_field_mesh(Heightfield(H, (0.0, 0.0, w, w)))
+    v = mesh.vertices
+    ring = v[np.isclose(v[:, 1], -cell) & (v[:, 0] >= 0.0) & (v[:, 0] <= w)]  # the first ring's south side
+    assert 4 * n > far_field.MAX_RING
+    # (the ring's side is two cells longer than the border's, cut into as many pieces)
+    assert len(ring) >= n - 2 and np.diff(np.sort(ring[:, 0])).max() <= cell * (1 + 3.0 / n)

@@ -19,7 +19,7 @@ Rings
     the tile)``, so that a camera 1 km above the ground sees no gap below the horizon
     wider than 1e-4 rad). Ring 0 is the border loop; ring ``k`` is the rectangle
     ``s_k`` outside the tile, each side sampled every ``sigma(s_k)`` (at least a cell,
-    at most :data:`MAX_RING` points a ring) and stitched to the previous ring's side
+    at most :data:`MAX_RING` points a ring past a quarter tile) and stitched to the previous ring's side
     (:func:`_stitch`), so the corner quadrants hold relief as the sides do. Its
     heights continue the DEM's own relief (issue 34): the DEM *mirrored* across its
     borders (reflected about the border samples, so the ground is continuous there
@@ -79,7 +79,8 @@ KEEP_RELIEF = 0.7
 #: 1280-pixel, 55 degree frame.
 RELIEF_ANGLE = 2e-3
 
-#: Most points on one ring (past it the ring is sampled, and blurred, more coarsely).
+#: Most points on one ring past a quarter tile from the border (past it the ring is
+#: sampled, and blurred, more coarsely); nearer, the border loop's count if larger.
 MAX_RING = 1024
 
 #: Detail of the ground rings: their relief is blurred by ``sigma = s / (2 DETAIL)`` at
@@ -243,8 +244,11 @@ def far_field_mesh(node, reach=None):
     sigma = blur_schedule(relief, max(dx, dy))
     for sk in ring_distances(max(dx, dy), reach, 1.0 + 0.7 / DETAIL)[1:]:
         lo, hi = (x0 - sk, y0 - sk), (x1 + sk, y1 + sk)
-        # Along a ring: at least a cell, at most MAX_RING points (then blurred as sampled).
-        spacing = max(sigma(sk), 2.0 * ((hi[0] - lo[0]) + (hi[1] - lo[1])) / MAX_RING, min(dx, dy))
+        # Along a ring: at least a cell, at most MAX_RING points (then blurred as sampled),
+        # or as many as the border loop within a quarter tile of it (a cell apart next to
+        # the tile, as the frame's samples are, on DEMs of any size).
+        most = max(MAX_RING, len(loop)) if sk < 0.25 * min(x1 - x0, y1 - y0) else MAX_RING
+        spacing = max(sigma(sk), 2.0 * ((hi[0] - lo[0]) + (hi[1] - lo[1])) / most, min(dx, dy))
         p, sides = _square_ring(lo, hi, spacing)
         V.append(np.column_stack([p, relief.heights(p[:, 0], p[:, 1], spacing)]))
         ring = [(off + k, t) for k, t in sides]
