@@ -80,6 +80,8 @@ def test_auto_coast_gets_sea_reaching_the_horizon(tmp_path, capsys):
     import tomllib
     cliff = float(re.search(r"cliff_height ([\d.e+]+)", head).group(1))
     rock = tomllib.loads(text)["materials"]["landscape"]["overrides"]["rock.scale"]
+    # rel 1e-2: the header prints the cliff height to three significant digits (a rounding
+    # of at most 0.5 %); the scene's value comes from the unrounded height.
     assert rock == pytest.approx(min(max(0.2 * cliff, 6.0), 30.0), rel=1e-2), (rock, cliff)
     # Rendered: no pixel below the horizon sees past the sea, no prism wall (the close shots face
     # the cliffs from the water: their top rows may be rock).

@@ -274,6 +274,10 @@ def presence_table(tile, host, region_lo, region_hi, distance_range=(-1.0, 1.0),
     pts = A.reshape(-1, 3)
     f = _values(host, pts)
     ok = (f >= va) & (f <= vb)
+    if contact is not None:
+        # Before the slope test: its gradients are the costly part, and a copy that
+        # does not rest on the host fails anyway.
+        ok &= np.repeat((f >= -contact).reshape(len(b), K).sum(-1) >= CONTACTS, K)
     if min_slope > 0 or max_slope < 90:
         sel = np.nonzero(ok)[0]
         # The slope of the host *surface* near the anchor: the gradient deep inside
@@ -301,8 +305,6 @@ def presence_table(tile, host, region_lo, region_hi, distance_range=(-1.0, 1.0),
         gam = _values(resistance, pts)
         ok &= (gam >= rl) & (gam <= rh)
     present = ok.reshape(len(b), K).sum(-1) > K / 2
-    if contact is not None:
-        present &= (f >= -contact).reshape(len(b), K).sum(-1) >= CONTACTS
     return PresentCopies(cells=T[cell[present]], blocks=b[present], tiles_lo=t_lo, shape=(*nt, B))
 
 

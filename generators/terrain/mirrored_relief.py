@@ -50,11 +50,8 @@ class MirroredRelief:
             size = (size + 1) // 2
             self.sigmas.append(math.sqrt(self.sigmas[-1] ** 2 + 4.0 ** (len(self.sigmas) - 1)))
         self.mean = float(H.mean())
-
-    @property
-    def relief(self) -> float:
-        """The DEM's standard deviation of height (metres)."""
-        return float(np.std(self.levels[0]))
+        #: The DEM's standard deviation of height (metres).
+        self.relief = float(H.std())
 
     def blur_keeping(self, share: float) -> float:
         """The widest blur of the pyramid (metres) whose heights keep at least ``share`` of
