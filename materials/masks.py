@@ -23,6 +23,17 @@ Strata (``strata_count`` colours ``strata{k}_color``, role ``"strata"``)
     (1 - rho)`` carves soft strata deeper, the colour bands line up with the
     terrain's ledges and notches on every cliff, folds and faults included.
 
+Strata of fallen blocks (``strata_blocks``, roles ``"strata_blocks"`` and ``"strata_blocks_gate"``)
+    A block that fell from a cliff carries the beds it broke from, not the bed at
+    the height where it came to rest (at the foot, the cliff's lowest bed: every
+    block under a banded wall came out in that one colour). Where the gate node's
+    value ``m`` is past ``strata_blocks_lo`` towards ``strata_blocks_hi`` the colour
+    blends, by ``smoothstep``, to the palette colour of the ``strata_blocks`` node
+    (the geology lifted into the cliff band, see
+    :mod:`arches_render.generators.terrain.talus`). The gate is the bare-rock mask's
+    node, evaluated once for both (the material shares equal mask nodes); the second
+    resistance is evaluated only in packets holding a lane on a block.
+
 Cavity (``cavity_radius``, role ``"cavity"``: a field, by default the scene's root)
     Ambient occlusion from the field itself, after Evans (2006) and Quilez's
     distance-field occlusion: with ``f`` positive inside matter and about a signed
@@ -70,7 +81,7 @@ import numpy as np
 
 from ..field.node import evaluate
 
-__all__ = ["PALETTES", "MASK_KINDS", "NODE_ROLES", "look_keys", "strata_index", "strata_levels", "terrain_look",
+__all__ = ["PALETTES", "MASK_KINDS", "NODE_ROLES", "look_keys", "node_value", "strata_index", "strata_levels", "terrain_look",
            "Look"]
 
 #: Named strata palettes, softest stratum first (linear RGB albedo).
@@ -84,10 +95,10 @@ PALETTES = {
 #: Layer-mask kinds besides a node's value.
 MASK_KINDS = ("node", "cavity", "wetness")
 #: Roles of the nodes a material reads (``set_node``).
-NODE_ROLES = ("strata", "cavity")
+NODE_ROLES = ("strata", "cavity", "strata_blocks", "strata_blocks_gate")
 MAX_STRATA = 8
 
-_FLOATS = {"strata_soft": 0.0, "cavity_radius": 2.0, "cavity_strength": 0.6, "cavity_damp": 0.5,
+_FLOATS = {"strata_soft": 0.0, "strata_blocks_lo": 0.0, "strata_blocks_hi": 1.0, "cavity_radius": 2.0, "cavity_strength": 0.6, "cavity_damp": 0.5,
            "wet_level": 0.0, "wet_height": 1.5, "wet_darken": 0.55, "wet_gloss": 0.5}
 _INTS = {"strata_count": 0, "strata_layer": 0, "cavity_samples": 3}
 _LUMA = (0.2126, 0.7152, 0.0722)
@@ -95,7 +106,7 @@ _LUMA = (0.2126, 0.7152, 0.0722)
 
 def look_keys(props_names) -> set:
     """The property names this module reads (for the plugin's unknown-key check)."""
-    keys = set(_FLOATS) | set(_INTS) | {"cavity", "wetness"}
+    keys = set(_FLOATS) | set(_INTS) | {"cavity", "wetness", "strata_blocks"}
     keys |= {k for k in props_names if k.startswith("strata") and k.endswith(("_color", "_level"))}
     return keys
 
@@ -197,6 +208,14 @@ def terrain_look(node, box, palette: str = "sandstone", geology: str = "geology"
     return look
 
 
+def node_value(values, node, p):
+    """``node.eval(p)`` once per shading call and node (``values``: the call's cache): the
+    fallen blocks' bare-rock masks and strata gate share one node, a costly blocks field."""
+    if id(node) not in values:
+        values[id(node)] = mi.Float(node.eval(mi.Point3f(p)))
+    return values[id(node)]
+
+
 def _op(v, kind=None):
     x = (kind or mi.Float)(v)
     dr.make_opaque(x)
@@ -244,7 +263,10 @@ class Look:
         self.wetness = bool(get("wetness", False))
         if self.f["strata_soft"] < 0.0 or self.f["cavity_radius"] <= 0.0 or self.f["wet_height"] <= 0.0:
             raise ValueError("triplanar: strata_soft must be >= 0, cavity_radius and wet_height > 0")
-        self.nodes = {"strata": None, "cavity": None}
+        self.blocks = bool(get("strata_blocks", False)) and self.strata
+        if self.blocks and self.f["strata_blocks_lo"] == self.f["strata_blocks_hi"]:
+            raise ValueError("triplanar: strata_blocks_lo must differ from strata_blocks_hi")
+        self.nodes = dict.fromkeys(NODE_ROLES)
 
     @property
     def strata(self) -> bool:
@@ -256,9 +278,9 @@ class Look:
         self.nodes[role] = node
 
     # ------------------------------------------------------------- terms
-    def strata_color(self, p):
-        """Palette colour of the stratum at ``p`` (``mi.Color3f``); needs the strata node."""
-        node = self.nodes["strata"]
+    def strata_color(self, p, role="strata"):
+        """Palette colour of the stratum at ``p`` (``mi.Color3f``) by the node of ``role``."""
+        node = self.nodes[role]
         rho = dr.clip(mi.Float(node.eval(mi.Point3f(p))), 0.0, 1.0)
         out = mi.Color3f(self.colors[0])
         soft = self.f["strata_soft"]
@@ -268,6 +290,15 @@ class Look:
                              dr.select(rho >= lv, 1.0, 0.0))
             out = out + step * (self.colors[k] - self.colors[k - 1])
         return out
+
+    def blocks_color(self, p, tint, m):
+        """The colour ``tint`` (the bed at ``p``) blended towards the bed of the fallen blocks'
+        node by ``smoothstep`` of the gate value ``m`` (see the module docstring)."""
+        lo, hi = self.f["strata_blocks_lo"], self.f["strata_blocks_hi"]
+        g = _smoothstep((m - lo) * dr.rcp(hi - lo))
+        return dr.if_stmt((mi.Point3f(p), tint, g), g > 0.0,
+                          lambda q, t, g: t + g * (self.strata_color(q, "strata_blocks") - t),
+                          lambda q, t, g: t, label="triplanar_blocks")
 
     def occlusion(self, p, n, active=True):
         """Cavity/occlusion ``o`` in ``[0, 1]`` at ``p`` with normal ``n`` (0 without a field)."""

@@ -365,7 +365,7 @@ class _TriplanarImpl:
         """
         active = mi.Bool(active)
         occ, wet = self._terrain_terms(si, active)
-        return self._weights(si, self.position(si, active), occ, wet)
+        return self._weights(si, self.position(si, active), occ, wet, {})
 
     def albedo(self, si, active=True):
         """Blended diffuse albedo ``sum_i w_i a_i`` at ``si`` (linear RGB), with detail and look terms.
@@ -390,7 +390,8 @@ class _TriplanarImpl:
         occ = self.look.occlusion(mi.Point3f(si.p), mi.Vector3f(si.sh_frame.n), mi.Bool(active) & cavity)
         return occ, self.look.wet(si.p, occ)
 
-    def _weights(self, si, p, occ, wet):
+    def _weights(self, si, p, occ, wet, values):
+        """Composite weights; ``values`` caches the mask nodes' values (:func:`.masks.node_value`)."""
         n = si.sh_frame.n
         slope = dr.acos(dr.clip(n.z, -1.0, 1.0)) * (180.0 / dr.pi)
         cov = [None]
@@ -403,7 +404,7 @@ class _TriplanarImpl:
                 node, lo, hi, kind = self.masks[i]
                 span = hi - lo
                 m = {"cavity": occ, "wetness": wet}.get(kind)
-                m = mi.Float(node.eval(mi.Point3f(p))) if m is None else m
+                m = M.node_value(values, node, p) if m is None else m
                 t = (m - lo) / dr.select(span == 0.0, 1e-20, span)
                 c = c * smoothstep01(t)
             cov.append(dr.clip(c, 0.0, 1.0))
@@ -451,7 +452,9 @@ class _TriplanarImpl:
         active = mi.Bool(active)
         p = self.position(si, active)
         occ, wet = self._terrain_terms(si, active, cavity)
-        w = self._weights(si, p, occ, wet)
+        values = {}
+        w = self._weights(si, p, occ, wet, values)
+        gate = M.node_value(values, self.look.nodes["strata_blocks_gate"], p) if self.look.blocks else None
         n = mi.Vector3f(si.sh_frame.n)
         slots = projection_slots(p, triplanar_weights(n, self.sharpness))
         fp = footprint(si, self.pixel_spread, cone_radius)
@@ -468,6 +471,8 @@ class _TriplanarImpl:
 
             def layer(albedo, ca, cb, i=i, strata=strata):
                 tint = self.look.strata_color(si.p) if strata else self.tint[i]
+                if strata and gate is not None:  # fallen blocks: the beds of their cliff
+                    tint = self.look.blocks_color(si.p, tint, gate)
                 a = tint * self._texel(i, slots, fp, xi) * a_fac
                 a = self.look.albedo_factor(dr.clip(a, 0.0, 1.0), occ, wet) * w[i]
                 s2 = dr.square(dr.clip(self.params["roughness"][i] * r_fac, 0.0, 1.0))

@@ -13,7 +13,10 @@ key            value
                name of :data:`arches_render.materials.masks.PALETTES` or 2..8 colours
                (softest rock first); ``levels`` the resistances where colour ``k``
                begins (increasing, in (0, 1); default ``k / K``); ``soft`` the width of
-               each step in resistance units (0: a hard step)
+               each step in resistance units (0: a hard step); ``blocks = {node, gate,
+               lo, hi}``: where ``smoothstep(lo, hi, gate)`` the colour is that of
+               resistance ``node`` instead (fallen blocks carry their cliff's beds,
+               :mod:`arches_render.materials.masks`)
 ``cavity``     ``true`` or table ``{[node = the field's root], radius = 2 m, strength =
                0.6, damp = 0.5, samples = 3 (1..8)}``: occlusion from the field
 ``wetness``    table ``{level, [height = 1.5 m], [darken = 0.55], [gloss = 0.5]}``:
@@ -108,6 +111,15 @@ def _strata(t: Table, builder, layer_names, props, nodes) -> None:
         props[f"strata{k}_color"] = c
     for k, lv in enumerate(levels, start=1):
         props[f"strata{k}_level"] = float(lv)
+    b = s.table("blocks", None)
+    if b is not None:
+        nodes["strata_blocks"] = builder.build(b.raw("node"), b, "node")
+        nodes["strata_blocks_gate"] = builder.build(b.raw("gate"), b, "gate")
+        lo, hi = b.number("lo"), b.number("hi")
+        if lo == hi:
+            raise b.error("hi", f"must differ from lo ({lo})")
+        props.update(strata_blocks=True, strata_blocks_lo=lo, strata_blocks_hi=hi)
+        b.finish()
     s.finish()
 
 
