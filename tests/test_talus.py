@@ -120,3 +120,84 @@ def test_cli_writes_the_blocks_bare_and_says_so_unless_refused(tmp_path, capsys)
     assert rc == 0, err
     text = out.read_text()
     assert "--sea-level 0 --no-fallen-blocks" in text and "talus" not in tomllib.loads(text)["nodes"]
+
+
+def _crossing(field, lo, hi, steps=40):
+    """Points where ``field`` changes sign on the segments ``lo -> hi`` (inside at ``lo``), by bisection."""
+    for _ in range(steps):
+        mid = 0.5 * (lo + hi)
+        inside = evaluate(field, mid) > 0
+        lo, hi = np.where(inside[:, None], mid, lo), np.where(inside[:, None], hi, mid)
+    return 0.5 * (lo + hi)
+
+
+def test_fallen_blocks_carry_the_beds_of_the_cliff_above_them(tmp_path, capsys):
+    """On a block's top the material's colour is a bed of the wall above the block, not the
+    bed at the block's own height (every block at the foot came out in that one colour); the
+    wall itself keeps its beds."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from arches_render import tomlfile
+    from arches_render.generators.terrain.scene_writer import toml_text
+    from arches_render.materials.masks import PALETTES, strata_index
+    from arches_render.render.renderer import load_materials
+    from arches_render.scene import load_scene
+    np.save(tmp_path / "mesa.npy", _mesa())
+    out = tmp_path / "mesa.toml"
+    rc, _, err = cli_out(capsys, "amplify", tmp_path / "mesa.npy", "-o", out, "--cell-size", "10",
+                         "--preset", "strata", "-q")
+    assert rc == 0, err
+    doc = tomlfile.load(out)
+    mat = doc["materials"]["landscape"]
+    # The albedo is then the palette colour itself: no texture, detail or cavity.
+    mat["overrides"]["rock.texture"] = ""
+    mat["detail"] = False
+    mat.pop("cavity", None)
+    out.write_text(toml_text(doc))
+    desc = load_scene(out)
+    bsdf = load_materials(desc)["landscape"]
+    strata = mat["strata"]
+    palette = np.array(PALETTES[strata["palette"]])
+    geology = desc.material_nodes["landscape"]["strata"]
+    root = desc.field
+    talus = root.children[0]
+    block = doc["nodes"]["talus"]["spacing"]
+
+    def albedo(p, n):
+        si = dr.zeros(mi.SurfaceInteraction3f, len(p))
+        si.p = mi.Point3f(p.T.astype(np.float32))
+        si.sh_frame = mi.Frame3f(mi.Vector3f(n.T.astype(np.float32)))
+        si.wi, si.t = si.sh_frame.n, mi.Float(1.0)
+        return np.array(bsdf.albedo(si)).T.reshape(-1, 3)
+
+    def bed(colours):
+        """Palette index of each colour (it must be one of them: atol 1e-5, float32 sums)."""
+        d = np.abs(colours[:, None, :] - palette[None]).max(-1)
+        assert np.all(d.min(1) < 1e-5), d.min(1).max()
+        return d.argmin(1)
+
+    # Block tops: down from 2 blocks above each block's centre to the centre (inside it),
+    # kept where the top stands a quarter block above the ground (a bare top, in the gate).
+    blocks = talus.children[1]
+    c = blocks.tile.centroid[blocks.presence.blocks] + blocks.presence.cells * blocks.tile.size
+    top = _crossing(root, c, c + [0.0, 0.0, 2.0 * block])
+    top = top[evaluate(talus.children[0], top) < -0.3 * block]
+    assert len(top) > 20
+    up = np.tile([0.0, 0.0, 1.0], (len(top), 1))
+    got = bed(albedo(top, up))
+    own = strata_index(evaluate(geology, top), strata["levels"])
+    # The beds of the wall above the blocks (foot at 1000 m, top at 1080 m).
+    col = np.concatenate([np.c_[top[:, :2], np.full(len(top), z)] for z in np.linspace(1000.0, 1080.0, 33)])
+    wall = set(strata_index(evaluate(geology, col), strata["levels"]).tolist())
+    assert set(got.tolist()) <= wall
+    # Not the block's own bed: at their own heights the blocks show one or two beds, each
+    # block mostly the one it rests in; lifted, at least two beds and most blocks another.
+    assert len(set(got.tolist())) >= 2 and np.mean(got != own) > 0.5, (np.bincount(got), np.mean(got != own))
+    # The wall keeps the bed at its own height (the gate is off the blocks).
+    ang = np.linspace(0.0, 2.0 * np.pi, 24, endpoint=False)
+    z = np.repeat([1020.0, 1040.0, 1060.0], len(ang))
+    a = np.tile(ang, 3)
+    d = np.c_[np.cos(a), np.sin(a), np.zeros_like(a)]
+    p = _crossing(root, d * 200.0 + np.c_[0 * a, 0 * a, z], d * 300.0 + np.c_[0 * a, 0 * a, z])
+    assert np.array_equal(bed(albedo(p, d)), strata_index(evaluate(geology, p), strata["levels"]))

@@ -411,6 +411,8 @@ def scene_document(result, name, work_dir, progress=None, close=3):
         mat["masks"] = look["masks"]
         if "cavity" in mat:
             mat["cavity"]["node"] = look["cavity_node"]
+        if "strata" in mat and "strata_blocks" in look:  # the blocks carry their cliff's beds
+            mat["strata"]["blocks"] = look["strata_blocks"]
     far = {"node": "terrain", "material": "landscape"}
     if water is not None and water.wet:
         doc["materials"]["water"] = {"type": "diffuse", "color": [0.03, 0.09, 0.12]}
