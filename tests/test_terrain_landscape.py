@@ -278,10 +278,11 @@ def test_water_quads_cover_each_wet_cell_once_at_its_level_in_maximal_runs():
 
 
 def test_legibility_rejects_a_slope_that_fills_the_frame_and_keeps_a_landscape():
-    """``shots.legibility`` on two ray grids: a plane seen square on (one sheet, no sky,
-    little depth) is not legible; a view over receding ground with a block in front and
-    sky above is."""
-    from arches_render.generators.terrain.shots import legibility
+    """``shots.legibility`` on three ray grids: a plane seen square on (one sheet, no sky,
+    no background) and a hillside seen obliquely under a strip of sky (its distances span
+    over twice: the depth ratio that judged views before passed it) are not legible; a
+    view over receding ground with a block in front and sky above is."""
+    from arches_render.generators.terrain.shots import LEGIBLE, legibility
     h, w = 18, 32
     v = np.linspace(0.4, -0.4, h)[:, None] * np.ones((1, w))
     u = np.ones((h, 1)) * np.linspace(-0.5, 0.5, w)[None]
@@ -294,11 +295,23 @@ def test_legibility_rejects_a_slope_that_fills_the_frame_and_keeps_a_landscape()
     ground_t = np.where(down, 10.0 / np.maximum(-D[..., 2], 1e-9), np.inf)
     block = (np.abs(u) < 0.15) & (v > -0.2) & (v < 0.1)
     view_t = np.where(block, 30.0 / D[..., 0], ground_t)
-    t = np.stack([wall_t, view_t])
+    # A hillside at 38 degrees, its contours 30 degrees off the view axis and its foot
+    # 35 m ahead at the camera's height, up to its crest 20 m above: sky beyond.
+    k, c, s = np.tan(np.radians(38)), np.cos(np.radians(30)), np.sin(np.radians(30))
+    rise = k * c * D[..., 0] + k * s * D[..., 1] - D[..., 2]
+    with np.errstate(divide="ignore"):
+        slope_t = np.where(rise > 0, k * c * 35.0 / rise, np.inf)
+    slope_t = np.where(slope_t * D[..., 2] <= 20.0, slope_t, np.inf)
+    t = np.stack([wall_t, view_t, slope_t])
     hit = np.isfinite(t)
-    out = legibility(np.stack([D, D]), np.where(hit, t, np.inf), hit)
+    out = legibility(np.stack([D, D, D]), np.where(hit, t, np.inf), hit)
     assert not out["legible"][0] and out["one_surface"][0] > 0.9 and out["sky"][0] == 0.0
+    assert out["background"][0] == 0.0
     assert out["legible"][1], {k: v[1] for k, v in out.items()}
+    assert out["background"][1] >= LEGIBLE["background"]
+    assert not out["legible"][2]
+    assert out["sky"][2] >= LEGIBLE["sky"] and out["depth"][2] > 2.0, {k: v[2] for k, v in out.items()}
+    assert out["background"][2] < LEGIBLE["background"], {k: v[2] for k, v in out.items()}
 
 
 def _escarpment(n=64):
@@ -310,22 +323,23 @@ def _escarpment(n=64):
 
 
 def _assert_legible_close_shots(out, at_least=3):
-    """The header's legibility of every close shot (sky share, depth ratio, one-sheet
+    """The header's legibility of every close shot (sky share, background share, one-sheet
     share) within shots.LEGIBLE, at least ``at_least`` of them, and the overview last."""
     import re
     from arches_render.generators.terrain.shots import LEGIBLE
     cams = next(line for line in _header(out) if line.startswith("Cameras: "))
-    found = re.findall(r"legible: sky (\d+) %, depth ([\d.]+)x, one sheet (\d+) %", cams)
+    found = re.findall(r"legible: sky (\d+) %, background (\d+) %, one sheet (\d+) %", cams)
     assert len(found) >= at_least and cams.rstrip().endswith("overview"), cams
-    for sky, depth, sheet in found:
-        # (the header rounds: a percent and a tenth)
-        assert float(sky) >= 100 * LEGIBLE["sky"] - 0.5 and float(depth) >= LEGIBLE["depth"] - 0.05, cams
+    for sky, background, sheet in found:
+        # (the header rounds to a percent)
+        assert float(sky) >= 100 * LEGIBLE["sky"] - 0.5, cams
+        assert float(background) >= 100 * LEGIBLE["background"] - 0.5, cams
         assert float(sheet) <= 100 * LEGIBLE["one_surface"] + 0.5, cams
 
 
 def test_escarpment_at_coarse_cells_gets_legible_close_shots(tmp_path, capsys):
     """An escarpment plateau at 200 m cells: four cameras, and the header's legibility of
-    every close shot (sky share, depth ratio, one-sheet share) within shots.LEGIBLE."""
+    every close shot (sky share, background share, one-sheet share) within shots.LEGIBLE."""
     np.save(tmp_path / "esc.npy", _escarpment())
     out = tmp_path / "esc.toml"
     rc, stdout, err = _amplify(capsys, tmp_path / "esc.npy", "-o", out, "--cell-size", "200", "--seed", "3")
@@ -354,6 +368,16 @@ def test_caldera_gets_cliffs_in_its_walls_and_a_lake_on_its_floor(tmp_path, caps
     water = trimesh.load(next(tmp_path.glob("caldera*.water.ply")), process=False)
     assert water.vertices[:, 2].max() < H[(r > 1300) & (r < 1500)].min() - 200.0
     desc = load_scene(out)
+    # Cameras below the walls do not look up at them past PITCH half fields, so the floor
+    # stays in the frame (the first looked up 33 degrees, over two half fields, before);
+    # 1e-6 rad: the camera's numbers as the TOML writes and reads them.
+    from arches_render.generators.terrain.shots import PITCH
+    for name, cam in desc.cameras.items():
+        if name == "overview":
+            continue
+        d = np.asarray(cam.target, float) - np.asarray(cam.origin, float)
+        vfov2 = math.atan(math.tan(math.radians(cam.fov) / 2) * 9 / 16)
+        assert abs(math.atan2(d[2], math.hypot(d[0], d[1]))) <= PITCH * vfov2 + 1e-6, name
     _check_shots(desc, _render_all_cameras(desc))
 
 

@@ -20,9 +20,9 @@ Views
     frame's half width, at most 1.5 times the landform's extent) and 5 heights
     above the ground under them (1.7, 6, 20, 60 and 150 m) look at it. A camera
     must stand in air (the amplified field below ``-0.25 m`` there), above any water
-    by 0.5 m, over the DEM (not the far field), and look down by less than
-    ``0.6 x`` half the vertical field of view (else the target is raised), so the
-    sky or the horizon is in the frame. Each view casts a 32 x 18 grid of rays
+    by 0.5 m, over the DEM (not the far field), and look down or up by less than
+    ``0.6 x`` half the vertical field of view (else the target is raised or lowered),
+    so the horizon is in the frame, and looking up, the ground at a wall's foot. Each view casts a 32 x 18 grid of rays
     (Embree) against the mesh of the amplified field around the landform (banded
     polygonization), the DEM mesh of the rest of the tile (not over the landform,
     where the DEM's surface would close the mouths of its caves) and the water: its *cover* is
@@ -33,8 +33,9 @@ Views
     ``min(cover, 0.45) - max(cover - 0.65, 0)`` times ``(0.5 + 0.5 sky)``, minus
     ``block / 2``; views without sky in the top rows are dropped, and so are views
     that are not *legible* (issue 34, :func:`legibility`): less than 8 % sky in the
-    frame, a depth ratio (90th over 10th percentile of the hit distances) below 2, or
-    more than 40 % of the frame on one smooth sheet of ground (a slope seen square on).
+    frame, less than 10 % of it *background* (ground at least three times as far as the
+    near ground: a slope filling the frame, square on or oblique, has none), or more than
+    40 % of the frame on one smooth sheet of ground (a slope seen square on).
     On the NM canyon DEM this replaced a sand slope filling 70 % of the frame (one
     sheet 57 %) by an undercut outcrop with a stratified mesa behind it, and a camera
     at 1.7 m against a slope (41 %) by one at 6 m that shows the slope's notches, the
@@ -79,14 +80,26 @@ HEIGHT_CLASSES = {"eye": (1.7, 6.0), "drone": (20.0, 60.0), "aerial": (150.0,)}
 #: share of the best view it displaces (:func:`_select`).
 CLASS_SCORE = 0.5
 _SPANS = (1.5, 3.0, 6.0, 12.0)
+#: The steepest aim, up or down, in half vertical fields of view: the horizon stays in the
+#: frame, and so does ground below the eye. (With the limit on looking down only, cameras
+#: below a caldera's walls looked up at them by over two half fields: wall and sky, no floor.)
+PITCH = 0.6
 _AZIMUTHS = 16
 
 #: Neighbouring rays whose hit distances differ by at most this fraction of the larger lie
 #: on one sheet (:func:`legibility`).
 SHEET_STEP = 0.08
-#: A legible view: at least this share of sky, this depth ratio, and at most this share of
-#: the frame on one sheet (:func:`legibility`).
-LEGIBLE = {"sky": 0.08, "depth": 2.0, "one_surface": 0.4}
+#: Hits at least this many times as far as the near ground (the 10th percentile of the hit
+#: distances) are the frame's *background* (:func:`legibility`).
+BACKGROUND_DEPTH = 3.0
+#: A legible view: at least this share of sky and of background, and at most this share of
+#: the frame on one sheet (:func:`legibility`). The background share replaced a depth ratio
+#: (90th over 10th percentile of the hit distances, at least 2), which an oblique slope
+#: filling the frame passed: rendered at 96x54 from the shipped DEMs' cameras, the slopes
+#: (NM canyon's and Jacksboro's ``undercut_1``, Aletsch's) have 2.2-3.0 and a background of
+#: 3-7 %, the shots a photographer would keep (canyon walls receding into haze, cliffed
+#: coasts, an undercut outcrop before mesas) 19-49 %.
+LEGIBLE = {"sky": 0.08, "background": 0.1, "one_surface": 0.4}
 
 
 class Shot(dict):
@@ -245,8 +258,11 @@ def legibility(D, t, hit):
     """Legibility of views from their ray grids (issue 34): per view,
 
     * ``sky``: the share of the frame whose rays escape upwards;
-    * ``depth``: the 90th over the 10th percentile of the hit distances (a frame with
-      foreground, subject and distance spans several times; a slope seen square on, little);
+    * ``depth``: the 90th over the 10th percentile of the hit distances (reported, not judged);
+    * ``background``: the share of the frame whose rays hit at least ``BACKGROUND_DEPTH``
+      times as far as the near ground (the 10th percentile): a frame with foreground,
+      subject and distance has some; a slope that fills the frame, square on or oblique,
+      has next to none, though its distances may span two or three times;
     * ``one_surface``: the share of the frame on the largest *smooth sheet*, rays joined to
       their four neighbours where both hit within ``SHEET_STEP`` of each other's distance (a
       slope that fills the frame is one sheet; silhouettes, the subject against its
@@ -264,14 +280,14 @@ def legibility(D, t, hit):
     Returns
     -------
     dict of numpy.ndarray
-        ``sky``, ``depth``, ``one_surface`` (each ``(n,)``) and ``legible``, whether a view
-        passes all three (:data:`LEGIBLE`).
+        ``sky``, ``depth``, ``background``, ``one_surface`` (each ``(n,)``) and ``legible``,
+        whether a view passes :data:`LEGIBLE`'s three thresholds.
     """
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
     n, h, w = t.shape
     sky = ((~hit) & (D[..., 2] > 0)).reshape(n, -1).mean(axis=1)
-    depth, sheet = np.ones(n), np.zeros(n)
+    depth, background, sheet = np.ones(n), np.zeros(n), np.zeros(n)
     # Ray pairs of the grid: each ray with its right and its lower neighbour.
     idx = np.arange(h * w).reshape(h, w)
     a = np.concatenate([idx[:, :-1].ravel(), idx[:-1].ravel()])
@@ -281,13 +297,14 @@ def legibility(D, t, hit):
         if hits.sum() >= 8:
             near, far = np.percentile(ti[hits], [10, 90])
             depth[i] = far / max(near, 1e-9)
+            background[i] = np.count_nonzero(hits & (ti >= BACKGROUND_DEPTH * near)) / (h * w)
         with np.errstate(invalid="ignore"):  # (inf - inf between two misses: not joined)
             join = hits[a] & hits[b] & (np.abs(ti[a] - ti[b]) <= SHEET_STEP * np.maximum(ti[a], ti[b]))
         graph = coo_matrix((np.ones(int(join.sum())), (a[join], b[join])), shape=(h * w, h * w))
         label = connected_components(graph, directed=False)[1][hits]
         sheet[i] = np.bincount(label).max() / (h * w) if len(label) else 0.0
-    legible = (sky >= LEGIBLE["sky"]) & (depth >= LEGIBLE["depth"]) & (sheet <= LEGIBLE["one_surface"])
-    return {"sky": sky, "depth": depth, "one_surface": sheet, "legible": legible}
+    legible = (sky >= LEGIBLE["sky"]) & (background >= LEGIBLE["background"]) & (sheet <= LEGIBLE["one_surface"])
+    return {"sky": sky, "depth": depth, "background": background, "one_surface": sheet, "legible": legible}
 
 
 def close_shots(root, plain, heights, extent, feature, water_level=None, water_mesh=None, count=3,
@@ -375,9 +392,10 @@ def close_shots(root, plain, heights, extent, feature, water_level=None, water_m
             origins, dist, az, ground, hh = origins[free], dist[free], az[free], ground[free], hh[free]
             targets = np.repeat(centre[None], len(origins), axis=0)
             horiz = np.hypot(*(targets[:, :2] - origins[:, :2]).T)
-            steep = np.arctan2(origins[:, 2] - targets[:, 2], horiz) > 0.6 * vfov2
-            # Looking down too steeply leaves no horizon in the frame: raise the aim.
-            targets[steep, 2] = origins[steep, 2] - math.tan(0.6 * vfov2) * horiz[steep]
+            # Looking down too steeply leaves no horizon in the frame, and looking up too
+            # steeply no ground: the aim is raised or lowered to at most PITCH half fields.
+            pitch = np.clip(np.arctan2(targets[:, 2] - origins[:, 2], horiz), -PITCH * vfov2, PITCH * vfov2)
+            targets[:, 2] = origins[:, 2] + np.tan(pitch) * horiz
             if len(origins):
                 score, cover, sky, legible = _score(scene, plain, origins, targets, fov, aspect, voxel, dist)
                 for k in np.nonzero((sky >= 0.5) & legible["legible"])[0]:
