@@ -204,3 +204,31 @@ def test_unlisted_gaps_bound_the_distance_to_the_boxes_left_out_of_each_list():
     assert np.allclose(got, brute * (1 - 1e-5) - 1e-4 * cell, rtol=0, atol=1e-9)
     assert np.all(got >= margin - 1e-4 * cell - 1e-9)
     assert np.mean(got > 2 * margin) > 0.3
+
+
+@pytest.mark.parametrize("res", [(37, 29, 3), (3, 40, 20), (30, 2, 9), (9, 17, 1), (12, 12, 12)])
+def test_thin_grids_are_stored_in_bricks_as_deep_as_they_are(res):
+    """A grid thinner than a brick on an axis is stored in bricks of the smallest power of
+    two holding it there (a coast's sets are four cells deep: bricks of 8^3 stored twice
+    their cells), and a point's cell reads the same datum as the dense grid's."""
+    from helpers import variant
+    variant()
+    import mitsuba as mi
+    rng = np.random.default_rng(3)
+    res = np.array(res)
+    n = int(np.prod(res))
+    data = rng.uniform(1.0, 2.0, n)
+    nonzero = rng.random(n) < 0.05
+    layout = brick_grid.BrickLayout.of_cells(nonzero, np.zeros(3), 2.0, res)
+    assert layout.shape == tuple(min(8, 1 << int(r - 1).bit_length()) for r in res)
+    cubic = brick_grid.BrickLayout._bricked(nonzero, res, False).any(axis=(1, 2, 3)).sum() * 512
+    assert layout.stored_cells <= cubic and (layout.shape != (8, 8, 8) or layout.stored_cells == cubic)
+    P = rng.uniform(0.0, 2.0 * res, (5000, 3))
+    cell, stored, _ = layout.lookup(mi.Point3f(*P.T.astype(np.float32)))
+    got = np.asarray(layout.compact(np.where(nonzero, data, 0.0)))[np.asarray(cell)[np.asarray(stored)]]
+    ix, iy, iz = np.clip(np.floor(P / 2.0).astype(int), 0, res - 1).T
+    dense = (iz * res[1] + iy) * res[0] + ix
+    want = np.where(nonzero, data, 0.0)[dense[np.asarray(stored)]]
+    np.testing.assert_array_equal(got, want)
+    # Every nonzero cell's point is in a stored brick.
+    assert np.asarray(stored)[nonzero[dense]].all()

@@ -26,7 +26,7 @@ Acceleration: the primitives' support boxes (skeleton box grown by
 ``c_i + R_i (1 + A N)``, ``N`` the fBm range) are listed per cell of a uniform grid
 (CSR lists built by :func:`arches_render.field.primitive_set.grid_lists`, the
 grid of :class:`~arches_render.field.CapsuleSet`; the per-cell arrays are then
-kept only in the 8^3 bricks where some datum is not 0,
+kept only in the bricks (8^3, thinner for a thin grid) where some datum is not 0,
 :class:`~arches_render.field.brick_grid.BrickLayout`); a point loops over its own
 cell's list in one Dr.Jit ``while_loop``. Unlike the capsule set this is *exact*:
 a primitive missing from the cell contributes exactly 0 there (compact support).
@@ -190,9 +190,9 @@ class SkeletalSet(Node):
         # large holds the steepest point of some falloff anyway).
         self.local_radius = SLOPE_REACH * cell
         slope = grid_lists(lo_p - self.local_radius, hi_p + self.local_radius, self.grid_lo, cell, res)
-        # Cells are stored in bricks of 8^3, only where some per-cell datum is not 0
-        # (empty bricks read 0 and list nothing, as their cells held): along a coast
-        # most of the box is air or rock that no primitive reaches.
+        # Cells are stored in bricks (8^3, or as thin as the grid) only where some per-cell
+        # datum is not 0 (empty bricks read 0 and list nothing, as their cells held): along
+        # a coast most of the box is air or rock that no primitive reaches.
         cell_L = self.cell_lipschitz_np.astype(np.float32) * np.float32(1.0 + 1e-6)
         cell_M = self.cell_value_max_np.astype(np.float32) * np.float32(1.0 + 1e-6)
         nonzero = (count > 0) | (slope[1] > 0) | (cell_L > 0) | (cell_M > 0)
