@@ -232,3 +232,28 @@ def test_thin_grids_are_stored_in_bricks_as_deep_as_they_are(res):
     np.testing.assert_array_equal(got, want)
     # Every nonzero cell's point is in a stored brick.
     assert np.asarray(stored)[nonzero[dense]].all()
+
+
+def test_compact_lists_keep_every_stored_cells_list_in_order():
+    """``BrickLayout.compact_lists``: each stored cell's list, read between its offset and
+    the next, is its dense list, entry for entry (the sums over a list keep their order,
+    so a skeletal set's values keep their bits)."""
+    from helpers import variant
+    variant()
+    from arches_render.field.primitive_set import grid_lists
+    rng = np.random.default_rng(5)
+    lo = rng.uniform(0.0, 40.0, (300, 3)) * [1.0, 1.0, 0.1]
+    hi = lo + rng.uniform(0.5, 6.0, (300, 3))
+    res = np.array([23, 19, 3])
+    start, count, index = grid_lists(lo, hi, np.zeros(3), 2.0, res)
+    layout = brick_grid.BrickLayout.of_cells(count > 0, np.zeros(3), 2.0, res)
+    offset, compact_index = layout.compact_lists(start, count, index)
+    # The dense cell of each stored one (-1: a brick's padding past the grid).
+    dense_of = layout.compact(np.arange(int(np.prod(res))) + 1) - 1
+    listed = 0
+    for c, d in enumerate(dense_of):
+        got = compact_index[offset[c]:offset[c + 1]]
+        want = index[start[d]:start[d] + count[d]] if d >= 0 else index[:0]
+        np.testing.assert_array_equal(got, want)
+        listed += d >= 0 and count[d] > 0
+    assert listed == int((count > 0).sum()) and len(compact_index) == len(index)

@@ -126,6 +126,18 @@ class BrickLayout:
         dense = np.asarray(dense)
         return np.ascontiguousarray(self._bricked(dense, self.res, 0, self.shape)[self.stored].reshape(-1))
 
+    def compact_lists(self, start, count, index):
+        """Per-cell lists (dense CSR ``start``, ``count``, ``index``) kept for the stored cells
+        only, in their order: ``(offset, index)``, cell ``c``'s list ``index[offset[c]:
+        offset[c + 1]]`` in its order. One offset a cell instead of a start and a count
+        (the next cell's offset is the count's, usually in the same cache line)."""
+        count = self.compact(count).astype(np.int64)
+        start = self.compact(start).astype(np.int64)
+        offset = np.zeros(len(count) + 1, dtype=np.int64)
+        np.cumsum(count, out=offset[1:])
+        at = np.repeat(start - offset[:-1], count) + np.arange(int(offset[-1]), dtype=np.int64)
+        return offset.astype(np.uint32), np.ascontiguousarray(np.asarray(index)[at], dtype=np.uint32)
+
     def brick_min(self, dense) -> np.ndarray:
         """Per brick, the smallest entry of a dense per-cell array over the brick's cells."""
         dense = np.asarray(dense)

@@ -205,14 +205,14 @@ class SkeletalSet(Node):
                                      UNLISTED_REACH * cell).astype(np.float32)
         self.layout = BrickLayout.of_cells(nonzero, self.grid_lo, cell, res)
         compact = self.layout.compact
-        self._slope_lists = (mi.UInt32(compact(slope[0])), mi.UInt32(compact(slope[1])), mi.UInt32(slope[2]))
+        self._slope_lists = tuple(mi.UInt32(v) for v in self.layout.compact_lists(*slope))
         self.slope_len = len(slope[2])
         self._empty = self._near = None
         self.near_len = 0
         if near is not None:
             self._empty = mi.Float(compact(empty))
             self._brick_empty = mi.Float(self.layout.brick_min(empty).astype(np.float32))
-            self._near = (mi.UInt32(compact(near[0])), mi.UInt32(compact(near[1])), mi.UInt32(near[2]))
+            self._near = tuple(mi.UInt32(v) for v in self.layout.compact_lists(*near))
             self._unlisted = mi.Float(compact(unlisted))
             self.near_len = len(near[2])
             reach_R = np.ascontiguousarray(R * (1.0 + span), dtype=np.float32)
@@ -229,8 +229,7 @@ class SkeletalSet(Node):
         self._cell_edge = opaque_float(cell)
         self._near_reach = opaque_float(NEAR_REACH * cell)
 
-        self._start, self._count = mi.UInt32(compact(start)), mi.UInt32(compact(count))
-        self._index = mi.UInt32(index)
+        self._lists = tuple(mi.UInt32(v) for v in self.layout.compact_lists(start, count, index))
         self._records = pack_records(a, b, R, c, e, grp, reach_R, seg, noise_K, Dmin, Ld)
         self._glo_box = ([opaque_float(v) for v in self.grid_lo],
                          [opaque_float(v) for v in self.grid_lo + cell * res])
@@ -349,8 +348,8 @@ class SkeletalSet(Node):
         return 3.0 + per * min(self.max_per_cell, 8)
 
     def nbytes(self):
-        # Per stored cell: start, count, L, M, slope start, count [empty, near start, count, gap].
-        per_cell = 24 + (16 if self._near is not None else 0)
+        # Per stored cell: offset, L, M, slope offset [empty, near offset, gap].
+        per_cell = 16 + (12 if self._near is not None else 0)
         near = (self.near_len + self.slope_len) * 4
         return (64 + self.n * RECORD * 4 + self.layout.stored_cells * per_cell + self.layout.nbytes()
                 + self.list_len * 4 + near)
@@ -406,11 +405,12 @@ class SkeletalSet(Node):
 
     def field(self, p):
         """Combined field ``F(p)`` (before the threshold) as ``mi.Float``."""
-        return self._accumulate(p, (self._start, self._count, self._index))[0]
+        return self._accumulate(p, self._lists)[0]
 
     def _accumulate(self, p, lists, us=(), footprint=None, radii=(), slants=(), direction=None):
-        """``(F(p), ds, slopes)``: the field over the cell lists ``lists`` (CSR ``start,
-        count, index``); for each ``u`` of ``us``, the smallest :func:`.skeletal_bounds.level_bound` over
+        """``(F(p), ds, slopes)``: the field over the cell lists ``lists`` (``offset, index``
+        of :meth:`~arches_render.field.brick_grid.BrickLayout.compact_lists`); for each
+        ``u`` of ``us``, the smallest :func:`.skeletal_bounds.level_bound` over
         them (``FAR`` where none acts) or, for a carving set (no positive energy), the
         largest :func:`.skeletal_bounds.core_bound`; for each radius of ``radii``, the local slope
         bound of :func:`.skeletal_bounds.local_slope` summed over the listed primitives (one member
@@ -424,10 +424,10 @@ class SkeletalSet(Node):
         rate = footprint.rate if level is not None else None
         # Slopes along the ray's line (skeletal_bounds, "Along a line"): noise-free sets.
         along = direction if radii and direction is not None and not self.noise else None
-        start_a, count_a, index_a = lists
+        offset_a, index_a = lists
         cell, stored, _, inside = self._cell(p)
-        start = dr.gather(mi.UInt32, start_a, cell, stored)
-        count = dr.select(inside, dr.gather(mi.UInt32, count_a, cell, stored), 0)
+        start = dr.gather(mi.UInt32, offset_a, cell, stored)
+        count = dr.select(inside, dr.gather(mi.UInt32, offset_a, cell + 1, stored) - start, 0)
         n_u = len(us) + len(slants)
 
         def visit(prim, ds):
@@ -544,7 +544,7 @@ class SkeletalSet(Node):
             F, geo, slopes = self._accumulate(p, lists, us, footprint, radii, slants, direction)
             f = F - self._threshold
         elif footprint is not None:
-            f = self._accumulate(p, (self._start, self._count, self._index), (), footprint)[0] - self._threshold
+            f = self._accumulate(p, self._lists, (), footprint)[0] - self._threshold
         else:
             f = self.eval(p)
         cell, stored, brick, inside = self._cell(p)
