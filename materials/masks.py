@@ -81,8 +81,8 @@ import numpy as np
 
 from ..field.node import evaluate
 
-__all__ = ["PALETTES", "MASK_KINDS", "NODE_ROLES", "look_keys", "node_value", "strata_index", "strata_levels", "terrain_look",
-           "Look"]
+__all__ = ["PALETTES", "MASK_KINDS", "NODE_ROLES", "look_keys", "node_value", "strata_index", "strata_levels",
+           "terrain_look", "Look"]
 
 #: Named strata palettes, softest stratum first (linear RGB albedo).
 PALETTES = {
@@ -98,7 +98,8 @@ MASK_KINDS = ("node", "cavity", "wetness")
 NODE_ROLES = ("strata", "cavity", "strata_blocks", "strata_blocks_gate")
 MAX_STRATA = 8
 
-_FLOATS = {"strata_soft": 0.0, "strata_blocks_lo": 0.0, "strata_blocks_hi": 1.0, "cavity_radius": 2.0, "cavity_strength": 0.6, "cavity_damp": 0.5,
+_FLOATS = {"strata_soft": 0.0, "strata_blocks_lo": 0.0, "strata_blocks_hi": 1.0, "cavity_radius": 2.0,
+           "cavity_strength": 0.6, "cavity_damp": 0.5,
            "wet_level": 0.0, "wet_height": 1.5, "wet_darken": 0.55, "wet_gloss": 0.5}
 _INTS = {"strata_count": 0, "strata_layer": 0, "cavity_samples": 3}
 _LUMA = (0.2126, 0.7152, 0.0722)

@@ -22,7 +22,8 @@ Views
     must stand in air (the amplified field below ``-0.25 m`` there), above any water
     by 0.5 m, over the DEM (not the far field), and look down or up by less than
     ``0.6 x`` half the vertical field of view (else the target is raised or lowered),
-    so the horizon is in the frame, and looking up, the ground at a wall's foot. Each view casts a 32 x 18 grid of rays
+    so the horizon is in the frame, and looking up, the ground at a wall's foot. Each
+    view casts a 32 x 18 grid of rays
     (Embree) against the mesh of the amplified field around the landform (banded
     polygonization), the DEM mesh of the rest of the tile (not over the landform,
     where the DEM's surface would close the mouths of its caves) and the water: its *cover* is

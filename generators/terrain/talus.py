@@ -160,8 +160,9 @@ def bare_rock_masks(gate: str, block: float) -> list:
 
     The landscape material grows grass and sand on gentle ground; a block's flat top
     would read as a grassy platform. The mask's field, the node ``gate``, is
-    ``min(f_host, -f_talus)`` (``difference`` of the carved terrain and the blocks): at a hit on a block it is the host's value there,
-    minus the point's height above the ground, and at a hit on the ground about 0
+    ``min(f_host, -f_talus)`` (``difference`` of the carved terrain and the blocks):
+    at a hit on a block it is the host's value there, minus the point's height above
+    the ground, and at a hit on the ground about 0
     (within the tracer's tolerance, a few decimetres at kilometres). The layers keep
     their coverage above ``-0.12 b`` and lose it below ``-0.25 b``: a block's top is
     bare, its foot may be grown round.
