@@ -162,10 +162,9 @@ def bare_rock_masks(gate: str, block: float) -> list:
     would read as a grassy platform. The mask's field, the node ``gate``, is
     ``min(f_host, -f_talus)`` (``difference`` of the carved terrain and the blocks):
     at a hit on a block it is the host's value there, minus the point's height above
-    the ground, and at a hit on the ground about 0
-    (within the tracer's tolerance, a few decimetres at kilometres). The layers keep
-    their coverage above ``-0.12 b`` and lose it below ``-0.25 b``: a block's top is
-    bare, its foot may be grown round.
+    the ground, and at a hit on the ground about 0 (within the tracer's tolerance, a
+    few decimetres at kilometres). The layers keep their coverage above ``-0.12 b``
+    and lose it below ``-0.25 b``: a block's top is bare, its foot may be grown round.
 
     Parameters
     ----------
@@ -195,7 +194,8 @@ def blocks_strata(gate: str, block: float, cliff_height: float, floor: float, se
     block, cliff_height : float
         Block size and the DEM's cliff height (m).
     floor : float
-        A height (m) below all the terrain: the plane of the lifting fault.
+        A height (m) below every block (the apron's lowest ground less a cliff height):
+        the plane of the lifting fault, which slips everything above it.
     seed : int
 
     Returns
