@@ -68,6 +68,7 @@ from ..backend import variant_class
 from .aovs import DEPTH_CHANNEL, MOMENT_CHANNELS, RAY_COUNT_KINDS, aov_channel_names, primary_aovs, second_moments
 from .heightfield_caster import make_tracer
 from .march import position_ulps
+from .shading_normals import facing_shading_frame
 
 __all__ = ["ImplicitPathIntegrator", "mis_weight", "register"]
 
@@ -189,6 +190,7 @@ class _ImplicitPathImpl:
             (:class:`~.march.TraceResult`; None without a field).
         """
         si = scene.ray_intersect(ray, mi.RayFlags.All, coherent=False, active=active)
+        si = facing_shading_frame(si, ray.d)  # no black lines below a mesh's silhouettes
         if self.tracer is None:
             return si, mi.Bool(False), None
         tmax = dr.select(si.is_valid(), si.t, ray.maxt)
