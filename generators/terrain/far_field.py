@@ -21,10 +21,13 @@ Rings
     ``s_k`` outside the tile, each side sampled every ``sigma(s_k)`` (at least a cell,
     at most :data:`MAX_RING` points a ring past a quarter tile) and stitched to the previous ring's side
     (:func:`_stitch`), so the corner quadrants hold relief as the sides do. Its
-    heights continue the DEM's own relief (issue 34): the DEM *mirrored* across its
-    borders (reflected about the border samples, so the ground is continuous there
-    and valleys and ridges run on past the edge), low-pass filtered by a Gaussian of
-    ``sigma(s)`` (:class:`.MirroredRelief`, :func:`blur_schedule`): ``s / (2 DETAIL)``
+    heights continue the DEM's own relief (issue 34): near the tile the DEM *mirrored*
+    across its borders (reflected about the border samples, so the ground is
+    continuous there and valleys and ridges run on past the edge), farther out a
+    continuation with the tile's spectrum, heights and tile-scale trends but none of
+    its landforms (:class:`.ContinuedRelief`: the mirror alone put every landform
+    again every two tiles, to the horizon), low-pass filtered by a Gaussian of
+    ``sigma(s)`` (:func:`blur_schedule`): ``s / (2 DETAIL)``
     near the tile, as a photograph's detail fades with distance, but never wider
     than the blur that keeps :data:`KEEP_RELIEF` of the DEM's height deviation, until
     the landforms subtend :data:`RELIEF_ANGLE`; only past that does the ground fade
@@ -62,7 +65,7 @@ from arches_render.field import Heightfield
 from arches_render.mesh.polygonize import TriangleMesh
 from arches_render.mesh.triangles import face_normals, merged_vertices, vertex_normals
 
-from .mirrored_relief import MirroredRelief
+from .continued_relief import ContinuedRelief
 
 __all__ = ["FarField", "blur_schedule", "far_field_mesh", "sea_ring_mesh", "ring_distances", "parse_far_field", "default_reach"]
 
@@ -121,7 +124,7 @@ def blur_schedule(relief, cell):
 
     Parameters
     ----------
-    relief : MirroredRelief
+    relief : ContinuedRelief or MirroredRelief
     cell : float
         The DEM's cell (metres).
 
@@ -240,7 +243,7 @@ def far_field_mesh(node, reach=None):
     off = sum(len(v) for v in V[:-1])
     prev = [(off + k, t) for k, t in _loop_sides(corners, len(loop))]
     off += len(loop)
-    relief = MirroredRelief(H, node.extent)
+    relief = ContinuedRelief(H, node.extent)
     sigma = blur_schedule(relief, max(dx, dy))
     for sk in ring_distances(max(dx, dy), reach, 1.0 + 0.7 / DETAIL)[1:]:
         lo, hi = (x0 - sk, y0 - sk), (x1 + sk, y1 + sk)

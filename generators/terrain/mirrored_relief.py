@@ -4,8 +4,7 @@
 blurs it by a Gaussian of any width from a pyramid; :func:`gaussian_blur` and
 :func:`bilinear` are the two scipy.ndimage filters it needs, written in numpy so that
 a render process does not import scipy.ndimage (0.17 s) for its far field.
-Used by :mod:`.far_field` (the ground rings) and :mod:`.scene_writer` (the ground
-ahead of the overview camera).
+Used by :mod:`.continued_relief`, whose heights are the mirror's near the tile.
 """
 
 from __future__ import annotations

@@ -43,7 +43,7 @@ import numpy as np
 
 from arches_render.materials.masks import terrain_look
 
-from .mirrored_relief import MirroredRelief
+from .continued_relief import ContinuedRelief
 from .presets import PRESETS
 
 __all__ = ["toml_text", "frame_camera", "landscape_material", "sun_for", "scene_document", "LANDFORM_NAMES"]
@@ -196,7 +196,7 @@ def frame_camera(heights, extent, features=None, fov=50.0, elevation=10.0, margi
     j = int(np.clip(round((origin[1] - y0) / dy), 0, ny - 1))
     origin[2] = max(origin[2], H[j, i] + 0.1 * (zhi - zlo) + 1.0)
     # Sky above the relief: camera and target rise together (the pitch kept) until no
-    # ground ahead, the tile's or the far field's (MirroredRelief, unblurred: at least
+    # ground ahead, the tile's or the far field's (ContinuedRelief, unblurred: at least
     # as high), rises above the line 15 % of the frame's height below its top.
     vfov2 = math.atan(math.tan(math.radians(fov) / 2) / aspect)
     top = math.tan(vfov2 - el - 0.3 * vfov2)
@@ -205,7 +205,7 @@ def frame_camera(heights, extent, features=None, fov=50.0, elevation=10.0, margi
     ahead = az + math.pi + turns  # from the camera towards the target, across the frame
     qx = origin[0] + s * np.cos(ahead)[None]
     qy = origin[1] + s * np.sin(ahead)[None]
-    ground = MirroredRelief(H, extent).heights(qx.ravel(), qy.ravel(), 0.0).reshape(qx.shape)
+    ground = ContinuedRelief(H, extent).heights(qx.ravel(), qy.ravel(), 0.0).reshape(qx.shape)
     rise = max(float(np.max(ground - s * top - origin[2])), 0.0)
     origin[2] += rise
     target = target + np.array([0.0, 0.0, rise])
