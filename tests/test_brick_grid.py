@@ -257,3 +257,34 @@ def test_compact_lists_keep_every_stored_cells_list_in_order():
         np.testing.assert_array_equal(got, want)
         listed += d >= 0 and count[d] > 0
     assert listed == int((count > 0).sum()) and len(compact_index) == len(index)
+
+
+def test_narrow_lists_read_back_every_entry():
+    """16-bit list entries (``compact_lists(..., narrow=True)``): :func:`list_entry` reads
+    entry for entry what the 32-bit lists hold, at even and odd positions and at the
+    last entry of an odd count; entries of 2^16 or more are refused."""
+    from helpers import variant
+    variant()
+    import drjit as dr
+    import mitsuba as mi
+    from arches_render.field.primitive_set import grid_lists
+    rng = np.random.default_rng(6)
+    lo = rng.uniform(0.0, 40.0, (301, 3)) * [1.0, 1.0, 0.1]
+    hi = lo + rng.uniform(0.5, 6.0, (301, 3))
+    res = np.array([23, 19, 3])
+    if len(grid_lists(lo, hi, np.zeros(3), 2.0, res)[2]) % 2 == 0:  # one more entry: an odd count
+        lo, hi = np.vstack([lo, [[1.0, 1.0, 1.0]]]), np.vstack([hi, [[1.5, 1.5, 1.5]]])
+    start, count, index = grid_lists(lo, hi, np.zeros(3), 2.0, res)
+    index = index.astype(np.int64) * 211 % 65536  # entries over the whole 16-bit range
+    layout = brick_grid.BrickLayout.of_cells(count > 0, np.zeros(3), 2.0, res)
+    offset, wide = layout.compact_lists(start, count, index)
+    offset_n, words = layout.compact_lists(start, count, index, narrow=True)
+    np.testing.assert_array_equal(offset, offset_n)
+    assert len(words) == (len(wide) + 1) // 2 and len(wide) % 2 == 1  # an odd count: the pad is read too
+    k = mi.UInt32(np.arange(len(wide), dtype=np.uint32))
+    got = brick_grid.list_entry(mi.UInt32(words), k, True).numpy()
+    np.testing.assert_array_equal(got, wide)
+    np.testing.assert_array_equal(brick_grid.list_entry(mi.UInt32(wide), k, False).numpy(), wide)
+    assert int(np.max(wide)) > 60000
+    with pytest.raises(ValueError):
+        brick_grid.pack_narrow([3, 65536])

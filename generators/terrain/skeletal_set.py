@@ -86,7 +86,7 @@ from arches_render.field.lod import OctaveLOD
 from arches_render.field.node import Node, box_distance, opaque_float
 from arches_render.field.noise import fbm, fbm_lipschitz
 from arches_render.field.window_filters import window_max
-from arches_render.field.brick_grid import BrickLayout
+from arches_render.field.brick_grid import BrickLayout, list_entry
 from arches_render.field.primitive_set import empty_distance, grid_lists, unlisted_gaps
 
 from .falloff import G_SLOPE, g_dr
@@ -111,6 +111,10 @@ NEAR_REACH = 0.25
 #: up to this. Goblins (320x180): camera steps 49.6 -> 39.9 a ray with the short lists
 #: (lists grown by 2 cell edges: 33.5, but dearer steps); a reach of 4 bought nothing more.
 UNLISTED_REACH = 2.0
+
+#: List entries (cell, slope and near lists together) from which a set of fewer than
+#: 2^16 primitives stores them in 16 bits (4 MB of 32-bit entries; Sea scale: 2.2 M).
+NARROW_LISTS = 1 << 20
 
 
 class SkeletalSet(Node):
@@ -203,16 +207,19 @@ class SkeletalSet(Node):
             nonzero |= near[1] > 0
             unlisted = unlisted_gaps(lo_p, hi_p, self.grid_lo, cell, res, NEAR_REACH * cell,
                                      UNLISTED_REACH * cell).astype(np.float32)
+        # 16-bit entries where the lists are large: unpacking costs a shift and a mask an entry.
+        entries = len(index) + len(slope[2]) + (len(near[2]) if near is not None else 0)
+        self._narrow = self.n < 1 << 16 and entries >= NARROW_LISTS
         self.layout = BrickLayout.of_cells(nonzero, self.grid_lo, cell, res)
         compact = self.layout.compact
-        self._slope_lists = tuple(mi.UInt32(v) for v in self.layout.compact_lists(*slope))
+        self._slope_lists = self._compact_lists(*slope)
         self.slope_len = len(slope[2])
         self._empty = self._near = None
         self.near_len = 0
         if near is not None:
             self._empty = mi.Float(compact(empty))
             self._brick_empty = mi.Float(self.layout.brick_min(empty).astype(np.float32))
-            self._near = tuple(mi.UInt32(v) for v in self.layout.compact_lists(*near))
+            self._near = self._compact_lists(*near)
             self._unlisted = mi.Float(compact(unlisted))
             self.near_len = len(near[2])
             reach_R = np.ascontiguousarray(R * (1.0 + span), dtype=np.float32)
@@ -229,7 +236,7 @@ class SkeletalSet(Node):
         self._cell_edge = opaque_float(cell)
         self._near_reach = opaque_float(NEAR_REACH * cell)
 
-        self._lists = tuple(mi.UInt32(v) for v in self.layout.compact_lists(start, count, index))
+        self._lists = self._compact_lists(start, count, index)
         self._records = pack_records(a, b, R, c, e, grp, reach_R, seg, noise_K, Dmin, Ld)
         self._glo_box = ([opaque_float(v) for v in self.grid_lo],
                          [opaque_float(v) for v in self.grid_lo + cell * res])
@@ -347,12 +354,16 @@ class SkeletalSet(Node):
         per = 12.0 * int(self.noise["octaves"]) if self.noise else 2.0
         return 3.0 + per * min(self.max_per_cell, 8)
 
+    def _compact_lists(self, start, count, index):
+        """``(offset, entries)`` over the stored cells, 16-bit where ``_narrow`` (``list_entry``)."""
+        return tuple(mi.UInt32(v) for v in self.layout.compact_lists(start, count, index, self._narrow))
+
     def nbytes(self):
         # Per stored cell: offset, L, M, slope offset [empty, near offset, gap].
         per_cell = 16 + (12 if self._near is not None else 0)
-        near = (self.near_len + self.slope_len) * 4
-        return (64 + self.n * RECORD * 4 + self.layout.stored_cells * per_cell + self.layout.nbytes()
-                + self.list_len * 4 + near)
+        entry = 2 if self._narrow else 4
+        lists = (self.list_len + self.near_len + self.slope_len) * entry
+        return 64 + self.n * RECORD * 4 + self.layout.stored_cells * per_cell + self.layout.nbytes() + lists
 
     # -- evaluation ---------------------------------------------------------------
     def _cell(self, p):
@@ -453,7 +464,7 @@ class SkeletalSet(Node):
         zeros = tuple(mi.Float(0.0) for _ in radii)
         if self.combine == "max" or not self.grouped:
             def body(i, acc, *rest):
-                prim = gather_primitive(self._records, dr.gather(mi.UInt32, index_a, start + i))
+                prim = gather_primitive(self._records, list_entry(index_a, start + i, self._narrow))
                 e, gk, ds, sl = visit(prim, rest[:n_u])
                 v = e * gk
                 # Union (max): one primitive at a time sets the slope; sum: they add.
@@ -466,7 +477,7 @@ class SkeletalSet(Node):
             return acc, rest[:n_u], rest[n_u:]
 
         def body_g(i, acc, cur_g, best, cur_e, *rest):
-            prim = gather_primitive(self._records, dr.gather(mi.UInt32, index_a, start + i))
+            prim = gather_primitive(self._records, list_entry(index_a, start + i, self._narrow))
             grp = prim.group
             e, gk, ds, sl = visit(prim, rest[:n_u])
             new = grp != cur_g
