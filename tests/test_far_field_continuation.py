@@ -15,7 +15,7 @@ from helpers import variant
 
 variant()
 
-from generators.terrain.continued_relief import BAND, GRID_PER_TILE, ContinuedRelief  # noqa: E402
+from generators.terrain.continued_relief import BAND, ContinuedRelief  # noqa: E402
 from generators.terrain.mirrored_relief import MirroredRelief  # noqa: E402
 
 W = 2000.0  # the tiles' side (metres)
@@ -87,16 +87,11 @@ def test_the_continuation_keeps_the_tiles_relief_and_its_heights():
     a = rng.uniform(0.0, 2.0 * np.pi, 20000)
     s = rng.uniform(1.0, 5.0, 20000) * W
     h = cont.heights(W / 2 + s * np.cos(a), W / 2 + s * np.sin(a), 0.0)
-    # Its heights are the tile's (matched to the tile's distribution at the continuation's
-    # spacing, W / GRID_PER_TILE): within the tile's range, with a deviation within 30 % of
-    # the tile's at that spacing (the draw of the noise and where the low part's trend
-    # falls vary it; measured 0.88 of it here).
-    step = W / GRID_PER_TILE
-    u = np.arange(0.0, W + 0.5 * step, step)
-    U, V = np.meshgrid(u, u)
-    tile = MirroredRelief(H, extent).heights(U.ravel(), V.ravel(), step)
+    # Its heights are the tile's (matched to the tile's own distribution): within the tile's
+    # range, with a deviation within 30 % of the tile's (the draw of the noise and where
+    # the low part's trend falls vary it; measured 0.93 of it here).
     assert H.min() <= h.min() and h.max() <= H.max()
-    assert 0.7 * tile.std() < h.std() < 1.3 * tile.std(), (h.std(), tile.std())
+    assert 0.7 * H.std() < h.std() < 1.3 * H.std(), (h.std(), H.std())
 
 
 def test_a_coasts_tile_scale_sea_and_land_run_on_as_the_mirror_has_them():
@@ -115,7 +110,7 @@ def test_a_coasts_tile_scale_sea_and_land_run_on_as_the_mirror_has_them():
         x = rng.uniform(lo * W, hi * W, 5000)
         share, share_mirror = (np.mean((r.heights(x, y, 20.0) < 0.0) == sea) for r in (cont, mirror))
         assert share_mirror > 0.95  # the premise: open sea, or land, a tile wide
-        # Measured 0.93-1.0: the continuation's detail raises an island or sinks a lake
+        # Measured 0.85-0.97: the continuation's detail raises an island or sinks a lake
         # here and there; without its low part (tile-scale trends) the first was 0.65.
         assert share > 0.8, (lo, hi, share)
 

@@ -42,8 +42,8 @@ import numpy as np
 
 from .node import cell_index, opaque_float
 
-__all__ = ["BrickGrid", "BrickLayout", "BRICK", "brick_shape", "DENSE_EDT_CELLS", "MAX_BRICKS", "cell_gaps", "list_entry",
-           "pack_narrow"]
+__all__ = ["BrickGrid", "BrickLayout", "BRICK", "brick_shape", "DENSE_EDT_CELLS", "MAX_BRICKS", "cell_gaps",
+           "list_entry", "pack_narrow"]
 
 #: Cells along a brick's edge (a power of two: cell -> brick is a shift).
 BRICK = 8

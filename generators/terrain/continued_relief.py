@@ -162,10 +162,11 @@ def _continuation(mirror, box, tile, rng):
     detail = np.fft.irfft2(np.fft.rfft2(noise) * np.fft.rfft2(spot, shape), shape)[:X.shape[0], :X.shape[1]]
     detail /= math.sqrt(spot.size)
 
-    # The tile's own heights at the grid's spacing give the distribution to match.
-    tx, ty = (np.arange(a, b + 0.5 * step, step) for a, b in ((x0, x1), (y0, y1)))
-    TX, TY = np.meshgrid(tx, ty)
-    target = np.sort(mirror.heights(TX.ravel(), TY.ravel(), step))
+    # The tile's own heights, unblurred, give the distribution to match: the grid stands in
+    # for the DEM, and the far field blurs it as it blurs the mirror. (Matched to the tile
+    # blurred by a grid step through the pyramid, a tile of ridges a third of it apart
+    # lost a third of its deviation before the rings blurred it again.)
+    target = np.sort(np.asarray(mirror.levels[0], np.float64).ravel())
     grid = (low + detail).ravel()
     ranks = np.empty(grid.size, np.float64)
     ranks[np.argsort(grid)] = (np.arange(grid.size) + 0.5) / grid.size
