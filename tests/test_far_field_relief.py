@@ -186,3 +186,14 @@ def test_the_first_rings_of_a_large_dem_are_as_fine_as_its_border():
     assert 4 * n > far_field.MAX_RING
     # (the ring's side is two cells longer than the border's, cut into as many pieces)
     assert len(ring) >= n - 2 and np.diff(np.sort(ring[:, 0])).max() <= cell * (1 + 3.0 / n)
+
+
+def test_a_dem_two_samples_wide_is_itself_unblurred():
+    """A DEM two samples wide has no pyramid level past its own: unblurred, its heights are
+    its own (they were its mean); blurred by a sample or more, its mean."""
+    H = np.array([[0.0, 10.0, 20.0, 30.0], [5.0, 15.0, 25.0, 35.0]])
+    relief = MirroredRelief(H, (0.0, 0.0, 300.0, 100.0))
+    x, y = np.array([0.0, 100.0, 250.0, 300.0]), np.array([0.0, 100.0, 50.0, 100.0])
+    # atol 1e-9 m: float64 bilinear weights (exact at samples, 2.5 m + 25 m at the middle point).
+    assert np.allclose(relief.heights(x, y, 0.0), [0.0, 15.0, 27.5, 35.0], atol=1e-9)
+    assert np.allclose(relief.heights(x, y, 100.0), H.mean(), atol=1e-9)

@@ -105,8 +105,10 @@ class MirroredRelief:
 
         top = len(self.sigmas) - 1
         if s >= self.sigmas[top]:
-            # Past the coarsest level: to the mean over one octave of sigma.
-            w = min(math.log2(s / self.sigmas[top]) if self.sigmas[top] > 0 else 1.0, 1.0)
+            # Past the coarsest level: to the mean over one octave of sigma. A DEM two samples
+            # wide has no level past its own: to the mean over one sample (it returned the
+            # mean even unblurred).
+            w = min(math.log2(s / self.sigmas[top]) if self.sigmas[top] > 0 else s, 1.0)
             return (1.0 - w) * level(top) + w * self.mean
         j = int(np.searchsorted(self.sigmas, s, side="right")) - 1
         w = (s - self.sigmas[j]) / (self.sigmas[j + 1] - self.sigmas[j])
