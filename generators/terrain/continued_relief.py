@@ -3,18 +3,18 @@
 Mirroring a DEM across its borders (:class:`.MirroredRelief`) continues it without a
 seam, but a mirror is periodic: every landform of the tile comes back every two
 tiles, out to the horizon. Behind every shot of a 0.86 km volcanic tile its crater
-stood again every tile for 26 km, the inner walls of the copies dark crescents on
-the far hills; a caldera got a twin cone beside it. :class:`ContinuedRelief` keeps
+stood again every tile for 26 km; a caldera got a twin cone beside it.
+:class:`ContinuedRelief` keeps
 the mirror near the tile, where it carries valleys and ridges across the border, and
 farther out replaces it by a continuation that has the tile's relief and character
 but none of its landforms:
 
 Low part
     The mirror blurred by ``sigma_c =`` :data:`LOW_BLUR` ``T`` (``T`` the tile's
-    shorter side): the tile-scale trends continue as mirrored (the sea stays on the
-    sea's side, a plateau's edge runs on), but a Gaussian of a quarter tile takes out
-    any landform under about half a tile (a 400 m crater keeps 0.4 % of its depth on
-    an 0.86 km tile).
+    shorter side): the tile-scale trends continue as mirrored (a plateau's edge runs
+    on; a coast's sea and land alternate in bands a tile wide, as in the mirror), but
+    a Gaussian of a quarter tile takes out any landform under about half a tile (a
+    400 m crater keeps 0.4 % of its depth on an 0.86 km tile).
 Detail
     Asymptotic discrete spot noise (Galerne et al. 2011): white noise convolved with
     the tile's own detail (its mirrored period, less the low part), over the square
@@ -22,9 +22,9 @@ Detail
     spectrum, i.e. the sizes and orientations of its landforms, and random phases: no
     landform of the tile recurs in it.
 Character
-    Low part plus detail, remapped to the tile's own height distribution (histogram
-    matching, Heeger & Bergen 1995): plateaus keep flat tops at the tile's heights,
-    plains stay flat, a coast's sea floor stays below its sea.
+    Low part plus detail, remapped to the tile's own (unblurred) height distribution
+    (histogram matching, Heeger & Bergen 1995): plateaus keep flat tops at the tile's
+    heights, plains stay flat.
 
 The continuation is a grid of spacing about ``T /`` :data:`GRID_PER_TILE` reaching
 :data:`GRID_TILES` tiles past the tile on every side (mirrored beyond, where the far
