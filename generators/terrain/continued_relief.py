@@ -151,8 +151,9 @@ def _continuation(mirror, box, tile, rng):
     sigma_c = LOW_BLUR * tile
     low = mirror.heights(X.ravel(), Y.ravel(), sigma_c).reshape(X.shape)
 
-    # The spot: one period of the mirror (two tiles a side) at the grid's spacing, less its low part.
-    px, py = (np.arange(int(round(2.0 * (b - a) / step))) * step + a for a, b in ((x0, x1), (y0, y1)))
+    # The spot: one period of the mirror (two tiles a side) at the grid's spacing, less its low
+    # part; along a long tile's long side a window of it, no longer than the grid.
+    px, py = (np.arange(min(int(round(2.0 * (b - a) / step)), GRID_MAX)) * step + a for a, b in ((x0, x1), (y0, y1)))
     PX, PY = np.meshgrid(px, py)
     spot = (mirror.heights(PX.ravel(), PY.ravel(), step) - mirror.heights(PX.ravel(), PY.ravel(), sigma_c))
     spot = spot.reshape(PX.shape)

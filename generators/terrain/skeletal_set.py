@@ -112,8 +112,8 @@ NEAR_REACH = 0.25
 #: (lists grown by 2 cell edges: 33.5, but dearer steps); a reach of 4 bought nothing more.
 UNLISTED_REACH = 2.0
 
-#: List entries (cell, slope and near lists together) from which a set of fewer than
-#: 2^16 primitives stores them in 16 bits (4 MB of 32-bit entries; Sea scale: 2.2 M).
+#: List entries (cell, slope, near) from which a set of fewer than 2^16 primitives stores them
+#: in 16 bits (Sea scale: 2.2 M); below, unpacking (a shift and a mask) is not worth it.
 NARROW_LISTS = 1 << 20
 
 
@@ -207,7 +207,6 @@ class SkeletalSet(Node):
             nonzero |= near[1] > 0
             unlisted = unlisted_gaps(lo_p, hi_p, self.grid_lo, cell, res, NEAR_REACH * cell,
                                      UNLISTED_REACH * cell).astype(np.float32)
-        # 16-bit entries where the lists are large: unpacking costs a shift and a mask an entry.
         entries = len(index) + len(slope[2]) + (len(near[2]) if near is not None else 0)
         self._narrow = self.n < 1 << 16 and entries >= NARROW_LISTS
         self.layout = BrickLayout.of_cells(nonzero, self.grid_lo, cell, res)
