@@ -35,7 +35,8 @@
                       camera ray a pixel, a shadow ray to the sun's disk and a cosine
                       bounce from each hit) on ``fig23_goblins``, ``every_generator`` and
                       the amplified NM canyon, with the renderer's tracer, the sphere
-                      tracer alone, the cell tracer (surface cells) and the sphere tracer
+                      tracer alone, the cell tracer (surface cells), the cover tracer
+                      (``cover``: casts against the cells' cover) and the sphere tracer
                       with its sun map (``sun_columns``) in the same run. Value: the largest mean
                       of shadow steps with the renderer's tracer; baseline: the goal,
                       20. Extra fields: mean, 99th percentile and mean packet maximum
@@ -47,6 +48,14 @@
                       against the same field sampled at the mesh voxel and rendered as
                       Mitsuba's own ``sdfgrid`` shape (320x180, 16 spp, warm): field
                       seconds over sdfgrid seconds; baseline: the goal, 1.
+``render_cover_vs_sphere``  (issue 32) the alternative the issue asked to measure: the
+                      cells where the surface may be as a cover traced by Mitsuba's ray
+                      tracer (``arches_render.render.cover_tracer``), against the sphere
+                      tracer, rendering ``fig23_goblins``, ``fig23_arch_bridge`` and
+                      ``every_generator`` from every camera (160x90, 8 spp, warm, the
+                      renderer's settings otherwise). Value: the median of the per-scene
+                      time ratios (cover over sphere); baseline: 1 (below pays). Extra
+                      fields: per-scene ratios, the cover's build seconds and triangles.
 ``render_landscape_end_to_end``  (issue 32) per landscape (the gallery and the real
                       DEMs), the field path (scene build: the tracer's structures
                       included, plus the render) over the mesh path (polygonization at
@@ -226,6 +235,7 @@ def bench_trace_steps_by_ray_type(repeat):
     import tempfile
 
     from arches_render.render.cell_tracer import CellTracer
+    from arches_render.render.cover_tracer import CoverTracer
     from arches_render.render.heightfield_caster import make_tracer
     from arches_render.scene import load_scene
     from ray_steps import aim_at_sun, ray_steps
@@ -242,7 +252,8 @@ def bench_trace_steps_by_ray_type(repeat):
             tracers = {"renderer": make_tracer(desc.field, eps=r.eps, omega=r.omega, max_steps=r.max_steps,
                                                cells=r.surface_cells),
                        "sphere": SphereTracer(desc.field, eps=r.eps, omega=r.omega, max_steps=r.max_steps),
-                       "cells": CellTracer(desc.field, eps=r.eps, omega=r.omega, max_steps=r.max_steps)}
+                       "cells": CellTracer(desc.field, eps=r.eps, omega=r.omega, max_steps=r.max_steps),
+                       "cover": CoverTracer(desc.field, eps=r.eps, omega=r.omega, max_steps=r.max_steps)}
             if r.sun_columns:
                 aim_at_sun(desc, tracers["renderer"])  # as the renderer does
             tracers["sun_columns"] = SphereTracer(desc.field, eps=r.eps, omega=r.omega, max_steps=r.max_steps)
@@ -272,6 +283,57 @@ def bench_render_field_vs_sdfgrid(repeat):
     a, b = median_renders([field, grid], spp, repeat, warm_spp=spp)
     return dict(value=a / b, unit="x", baseline=1.0, baseline_is="goal", field_s=a, sdfgrid_s=b,
                 field_setup_s=t1 - t0, sdfgrid_setup_s=t2 - t1, resolution=f"{w}x{h}", spp=spp,
+                load=round(0.5 * (load0 + os.getloadavg()[0]), 2))
+
+
+@contextlib.contextmanager
+def _cover_tracers(built):
+    """Within the block, scenes built trace their sphere-traced fields with a
+    :class:`~arches_render.render.cover_tracer.CoverTracer` (the renderer has no
+    setting for it: it does not pay on the CPU), appending each to ``built``."""
+    from arches_render.render import integrator
+    from arches_render.render.cover_tracer import CoverTracer
+    from arches_render.render.heightfield_caster import make_tracer
+    from arches_render.render.sphere_tracer import SphereTracer
+
+    def cover_or_cast(field, eps=2e-4, omega=1.6, max_steps=512, cast=True, cells=False):
+        tracer = make_tracer(field, eps=eps, omega=omega, max_steps=max_steps, cast=cast)
+        if type(tracer) is SphereTracer:
+            tracer = CoverTracer(field, eps=eps, omega=omega, max_steps=max_steps)
+            built.append(tracer)
+        return tracer
+
+    integrator.make_tracer = cover_or_cast
+    try:
+        yield
+    finally:
+        integrator.make_tracer = make_tracer
+
+
+def bench_render_cover_vs_sphere(repeat):
+    from arches_render.render.jobs import set_camera
+    from arches_render.render.renderer import build_scene
+    from arches_render.scene import load_scene
+    from arches_render.timing import REPO, median_renders
+    w, h, spp = 160, 90, 8
+    load0 = os.getloadavg()[0]
+    ratios, cover = {}, {}
+    for name in ("fig23_goblins", "fig23_arch_bridge", "every_generator"):
+        desc = load_scene(REPO / "scenes" / "gallery" / f"{name}.toml")
+        sphere, built = build_scene(desc, "field", w, h), []
+        with _cover_tracers(built):
+            covered = build_scene(desc, "field", w, h)
+        ts = tc = 0.0
+        for cam in desc.cameras.values():
+            for scene in (sphere, covered):
+                set_camera(scene, cam.origin, cam.target, cam.up, cam.fov)
+            a, b = median_renders([sphere, covered], spp, repeat, warm_spp=spp)
+            ts, tc = ts + a, tc + b
+        ratios[name] = round(tc / ts, 3)
+        cover[name] = {k: round(float(built[0].stats[k]), 2) for k in ("cover_s", "cover_triangles", "leaf")} \
+            if built else None
+    return dict(value=statistics.median(ratios.values()), unit="x", baseline=1.0, baseline_is="break-even",
+                per_scene=ratios, cover=cover, resolution=f"{w}x{h}", spp=spp,
                 load=round(0.5 * (load0 + os.getloadavg()[0]), 2))
 
 
@@ -313,5 +375,6 @@ BENCHMARKS = {
     "render_landscape_field_vs_mesh": (bench_render_landscape_field_vs_mesh, 2),
     "trace_steps_by_ray_type": (bench_trace_steps_by_ray_type, 1),
     "render_field_vs_sdfgrid": (bench_render_field_vs_sdfgrid, 3),
+    "render_cover_vs_sphere": (bench_render_cover_vs_sphere, 3),
     "render_landscape_end_to_end": (bench_render_landscape_end_to_end, 1),
 }

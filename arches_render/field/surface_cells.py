@@ -179,6 +179,8 @@ class SurfaceCells:
         Footprint radii of the classes in leaf edges (:data:`FOOTPRINT_CLASSES`).
     slack : float, optional
         Field value added to every class's error (a tracer's largest hit tolerance).
+    keep_not_air : bool, optional
+        Keep the dense mask of the leaves that are not air (``not_air``; a byte a leaf).
 
     Attributes
     ----------
@@ -188,7 +190,7 @@ class SurfaceCells:
         Build seconds, leaves by kind, evaluations, bytes.
     """
 
-    def __init__(self, root, lo, hi, leaf, classes=FOOTPRINT_CLASSES, slack=0.0):
+    def __init__(self, root, lo, hi, leaf, classes=FOOTPRINT_CLASSES, slack=0.0, keep_not_air=False):
         if not 1 <= len(classes) <= MAX_CLASSES:
             raise ValueError(f"1 to {MAX_CLASSES} footprint classes (got {len(classes)})")
         t0 = time.perf_counter()
@@ -199,6 +201,9 @@ class SurfaceCells:
         self.res = np.maximum(np.ceil((np.asarray(hi, np.float64) - self.grid_lo) / self.leaf), 1).astype(np.int64)
         air, solid, evaluations = self._refine(root)
         K = len(self.radii)
+        #: With ``keep_not_air``, the leaves that are not air for every class ((z, y, x)
+        #: booleans, dense): where a surface may be (a cover's voxels); else None.
+        self.not_air = air < K if keep_not_air else None
         words = air.astype(np.uint32) | (solid.astype(np.uint32) << np.uint32(4))
         for k in range(1, K + 1):
             words |= _chessboard(air >= k).astype(np.uint32) << np.uint32(8 * k)
