@@ -197,3 +197,38 @@ def test_a_dem_two_samples_wide_is_itself_unblurred():
     # atol 1e-9 m: float64 bilinear weights (exact at samples, 2.5 m + 25 m at the middle point).
     assert np.allclose(relief.heights(x, y, 0.0), [0.0, 15.0, 27.5, 35.0], atol=1e-9)
     assert np.allclose(relief.heights(x, y, 100.0), H.mean(), atol=1e-9)
+
+
+@pytest.mark.parametrize("sea", [False, True])
+def test_rays_just_below_the_horizon_of_a_high_camera_meet_the_far_field(sea):
+    """No void at the horizon: from 100 km above a 6.4 km tile, rays 3e-5 rad below the
+    horizontal (a fifth of a pixel of a 4K frame at 50 degrees) meet the far ground (or
+    its sea ring) in every azimuth, where the old 1e7 m reach let them pass its edge
+    into the sky's black lower hemisphere (a row of dark specks along an overview's horizon)."""
+    import drjit as dr
+    import mitsuba as mi
+    from generators.terrain.far_field import default_reach, sea_ring_mesh
+    H, extent = _ridge_dem()
+    reach = default_reach(extent)
+    meshes = [far_field_mesh(Heightfield(H, extent))]
+    if sea:
+        meshes.append(sea_ring_mesh(extent, 150.0, reach))
+    shapes = {}
+    for k, m in enumerate(meshes):
+        shape = mi.Mesh(f"far{k}", len(m.vertices), len(m.faces))
+        params = mi.traverse(shape)
+        params["vertex_positions"] = mi.Float(np.asarray(m.vertices, np.float32).ravel())
+        params["faces"] = mi.UInt32(np.asarray(m.faces, np.uint32).ravel())
+        params.update()
+        shapes[f"far{k}"] = shape
+    scene = mi.load_dict({"type": "scene", **shapes})
+    n = 720
+    azimuth = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
+    dip = 3e-5
+    d = np.column_stack([np.cos(azimuth) * np.cos(dip), np.sin(azimuth) * np.cos(dip), np.full(n, -np.sin(dip))])
+    o = np.tile([3200.0, 3200.0, 1e5], (n, 1))
+    ray = mi.Ray3f(mi.Point3f(*(mi.Float(o[:, i].astype(np.float32)) for i in range(3))),
+                   mi.Vector3f(*(mi.Float(d[:, i].astype(np.float32)) for i in range(3))))
+    hit = scene.ray_intersect_preliminary(ray).is_valid()
+    dr.eval(hit)
+    assert hit.numpy().all(), np.flatnonzero(~hit.numpy())[:10]

@@ -15,9 +15,8 @@ Frame
     under it. A plain ``heightfield`` is exact up to its border and gets no frame.
 Rings
     From the border outwards, rings at distances ``s_0 = 0, s_1 = cell,
-    s_{k+1} = (1 + 0.7 / DETAIL) s_k`` up to ``reach`` (default ``max(1e7 m, 1000 x
-    the tile)``, so that a camera 1 km above the ground sees no gap below the horizon
-    wider than 1e-4 rad). Ring 0 is the border loop; ring ``k`` is the rectangle
+    s_{k+1} = (1 + 0.7 / DETAIL) s_k`` up to ``reach`` (default ``max(1e10 m, 1000 x
+    the tile)``, :func:`default_reach`). Ring 0 is the border loop; ring ``k`` is the rectangle
     ``s_k`` outside the tile, each side sampled every ``sigma(s_k)`` (at least a cell,
     at most :data:`MAX_RING` points a ring past a quarter tile) and stitched to the previous ring's side
     (:func:`_stitch`), so the corner quadrants hold relief as the sides do. Its
@@ -48,7 +47,7 @@ Scene table (``[[far_field]]``, one per heightfield)::
     [[far_field]]
     node = "terrain"            # a heightfield or implicit_heightfield node, untransformed
     material = "landscape"      # the ground's material
-    reach = 1e7                 # optional, metres from the border
+    reach = 1e10                # optional, metres from the border
     sea_level = 0.0             # optional: a sea ring at this level ...
     water_material = "water"    # ... in this material (required with sea_level)
 """
@@ -94,10 +93,21 @@ MAX_RING = 1024
 DETAIL = 4.0
 
 
+#: The far field's least reach (metres): a camera ``h`` above the ground sees a gap of
+#: ``h / REACH`` radians below the horizon, where rays pass the far field's edge into the
+#: sky's black lower hemisphere; 1e-5 rad at 100 km. (At 1e7 m an Alpine overview 7 km
+#: up showed a row of dark specks along its horizon, partly covered pixels; 1e9 m still
+#: darkened the row above it. The rings past the fade are flat and sparse: +350 faces
+#: from 1e7 to 1e10 m. Float32 rounds those vertices by up to 512 m, and what lies there
+#: is fully fogged.)
+REACH = 1e10
+
+
 def default_reach(extent) -> float:
-    """Default distance of the far field's outer edge from the border (metres)."""
+    """Default distance of the far field's outer edge from the border (metres):
+    :data:`REACH`, or a thousand tiles for larger ones."""
     x0, y0, x1, y1 = extent
-    return max(1e7, 1000.0 * max(x1 - x0, y1 - y0))
+    return max(REACH, 1000.0 * max(x1 - x0, y1 - y0))
 
 
 def _loop(nx, ny):
