@@ -15,7 +15,7 @@ from helpers import variant
 
 variant()
 
-from generators.terrain.continued_relief import BAND, ContinuedRelief  # noqa: E402
+from generators.terrain.continued_relief import BAND, COAST_MARGIN, ContinuedRelief  # noqa: E402
 from generators.terrain.mirrored_relief import MirroredRelief  # noqa: E402
 
 W = 2000.0  # the tiles' side (metres)
@@ -94,16 +94,21 @@ def test_the_continuation_keeps_the_tiles_relief_and_its_heights():
     assert 0.7 * H.std() < h.std() < 1.3 * H.std(), (h.std(), H.std())
 
 
-def test_a_coasts_tile_scale_sea_and_land_run_on_as_the_mirror_has_them():
-    """A coast, sea on the west half of the tile. Its mirror has the sea in bands a tile
-    wide (x in (-W/2, W/2), (3W/2, 5W/2), ...) and land between: the continuation keeps
-    those tile-scale trends (its low part), and only its detail is new."""
-    n = 129
+def _coast_dem(seed=5, n=129):
+    """A coast, sea (below 0 m) on the west half of the tile, land on the east."""
     x = np.linspace(0.0, W, n)
     X, Y = np.meshgrid(x, x)
-    rng = np.random.default_rng(5)
+    rng = np.random.default_rng(seed)
     H = 80.0 * np.tanh((X - W / 2) / 150.0) + 10.0 + 6.0 * np.sin(Y / 90.0) * np.cos(X / 70.0)
-    H += 2.0 * rng.standard_normal(H.shape)
+    return H + 2.0 * rng.standard_normal(H.shape)
+
+
+def test_without_a_sea_a_coasts_tile_scale_trends_run_on_as_the_mirror_has_them():
+    """Without a sea level the continuation knows no sea: its mirror has the west's sea
+    in bands a tile wide (x in (-W/2, W/2), (3W/2, 5W/2), ...) and land between, and the
+    continuation keeps those tile-scale trends (its low part); only its detail is new."""
+    H = _coast_dem()
+    rng = np.random.default_rng(5)
     cont, mirror = ContinuedRelief(H, (0.0, 0.0, W, W)), MirroredRelief(H, (0.0, 0.0, W, W))
     y = rng.uniform(-2.0 * W, 3.0 * W, 5000)
     for lo, hi, sea in ((1.7, 2.3, True), (-1.3, -0.7, False), (2.7, 3.3, False), (-2.3, -1.7, True)):
@@ -113,6 +118,37 @@ def test_a_coasts_tile_scale_sea_and_land_run_on_as_the_mirror_has_them():
         # Measured 0.85-0.97: the continuation's detail raises an island or sinks a lake
         # here and there; without its low part (tile-scale trends) the first was 0.65.
         assert share > 0.8, (lo, hi, share)
+
+
+def test_with_a_sea_a_coast_runs_on_as_sea_and_land():
+    """With the sea level, past the tile's sea border lies sea and past its land border
+    land, to six tiles out (the mirror put a far shore a tile out to sea, and a sea a
+    tile inland); north and south, where the coastline leaves the tile, it runs on:
+    its west sea, its east land. Heights far from the sea level keep the continuation's."""
+    H = _coast_dem()
+    rng = np.random.default_rng(6)
+    sea, plain = ContinuedRelief(H, (0.0, 0.0, W, W), sea_level=0.0), ContinuedRelief(H, (0.0, 0.0, W, W))
+    y = rng.uniform(-5.0 * W, 6.0 * W, 5000)
+    west, east = rng.uniform(-6.0 * W, -BAND[1] * W, 5000), rng.uniform((1.0 + BAND[1]) * W, 7.0 * W, 5000)
+    assert np.mean(plain.heights(west, y, 20.0) > 0.0) > 0.3  # the premise: land out to sea
+    assert np.all(sea.heights(west, y, 20.0) < 0.0)
+    assert np.all(sea.heights(east, y, 20.0) > 0.0)
+    # Beyond the north and south borders, well clear of where the coast crosses them.
+    for x0, x1, wet in ((0.0, 0.3 * W, True), (0.7 * W, W, False)):
+        x = rng.uniform(x0, x1, 4000)
+        yy = np.concatenate([rng.uniform(-4.0 * W, -BAND[1] * W, 2000), rng.uniform((1 + BAND[1]) * W, 5.0 * W, 2000)])
+        h = sea.heights(x, yy, 20.0)
+        assert np.all((h < 0.0) == wet), (x0, x1)
+    # Samples on their border's side of the sea, far from it, move by m^2 / (2 |h|) at most
+    # (the fold's hyperbola, m the margin), compared on the continuation's grid (the same
+    # seed in both). Those that do not are where the coastline leaves the tile, in the
+    # fade between sea and land (measured: 0.7 % of them); a sample on the wrong side is
+    # folded over (half of them here: the mirror's bands).
+    g0, g1 = (np.asarray(r.continued.levels[0]) for r in (plain, sea))
+    m = COAST_MARGIN * plain.relief
+    kept = (np.abs(g0) > 60.0) & (np.sign(g0) == np.sign(g1))
+    assert kept.mean() > 0.3
+    assert np.mean(np.abs(g1[kept] - g0[kept]) <= m * m / (2.0 * np.abs(g0[kept])) + 1e-6) > 0.98
 
 
 def test_the_same_dem_gives_the_same_far_field():
@@ -132,3 +168,16 @@ def test_a_flat_dem_continues_flat():
     assert cont.continued is None
     # atol 1e-9 m: the mirror's bilinear weights in float64 (they sum to 1 up to rounding).
     assert np.allclose(cont.heights(p[0], p[1], 0.0), 42.0, rtol=0.0, atol=1e-9)
+
+
+def test_the_far_fields_ground_keeps_a_coasts_sea_open():
+    """The far field's mesh takes the sea level (as amplify's scenes give it with a sea
+    ring): its ground out to sea, one to five tiles west, stays under the sea."""
+    from arches_render.field import Heightfield
+    from generators.terrain.far_field import far_field_mesh
+    H = _coast_dem().astype(np.float32)
+    for sea_level, dry in ((None, True), (0.0, False)):
+        v = far_field_mesh(Heightfield(H, (0.0, 0.0, W, W)), sea_level=sea_level).vertices
+        west = (v[:, 0] < -W) & (v[:, 0] > -5.0 * W) & (np.abs(v[:, 1] - 0.5 * W) < 2.0 * W)
+        assert west.sum() > 50
+        assert np.any(v[west, 2] > 0.0) == dry  # (without it: the mirror's far shore)

@@ -26,6 +26,17 @@ Character
     (histogram matching, Heeger & Bergen 1995): plateaus keep flat tops at the tile's
     heights, plains stay flat.
 
+Coasts
+    With a sea level, the tile's border decides what lies past it: where the border
+    (the tile's share of sea within :data:`COAST_BLUR` ``T`` of its nearest border
+    point) is sea, the continuation is folded below the sea; where it is land, above
+    it (``z + / - sqrt((h - z)^2 + m^2)``, ``z`` the sea level, ``m`` a margin: heights far
+    from the sea stay, and what the mirror put on the wrong side of it comes back as
+    low hills or as sea floor); where the coast crosses the border, the two fade into
+    each other across that share's 0.35-0.65. The mirror put a coast's land again a tile out to sea (a
+    phantom far shore across an ocean, and a sea a tile inland): a coast continues
+    as sea and land, its coastline running on from where it leaves the tile.
+
 The continuation is a grid of spacing about ``T /`` :data:`GRID_PER_TILE` reaching
 :data:`GRID_TILES` tiles past the tile on every side (mirrored beyond, where the far
 field is blurred by at least ``keep`` and fading), seeded by the DEM's own bytes: the
@@ -51,7 +62,7 @@ import numpy as np
 
 from .mirrored_relief import MirroredRelief
 
-__all__ = ["ContinuedRelief", "BAND", "LOW_BLUR", "GRID_PER_TILE"]
+__all__ = ["ContinuedRelief", "BAND", "LOW_BLUR", "GRID_PER_TILE", "COAST_BLUR"]
 
 #: Where the continuation takes over from the mirror, in tiles (the shorter side) from
 #: the border: the mirror alone within ``BAND[0]``, the continuation alone past ``BAND[1]``.
@@ -59,6 +70,14 @@ BAND = (0.1, 0.35)
 
 #: Blur of the continuation's low part, in tiles (module docstring).
 LOW_BLUR = 0.25
+
+#: Blur of a coast's sea share, in tiles (module docstring, "Coasts"): the border's sea
+#: and land are read over about this much of it.
+COAST_BLUR = 0.125
+
+#: How far below (above) the sea a continuation held under (over) it stays, as a share
+#: of the DEM's height deviation: a shallow sea floor, a low coastal plain.
+COAST_MARGIN = 0.05
 
 #: Continuation grid samples a tile (shorter side), at most. The far field is blurred
 #: by at least ``BAND[0] T / 8`` where the continuation starts, so 32 samples a tile
@@ -83,9 +102,12 @@ class ContinuedRelief:
         ``(ny, nx)`` heights.
     extent : sequence of 4 floats
         ``(x0, y0, x1, y1)`` of the samples' corners (the tile).
+    sea_level : float, optional
+        The sea's level: past the tile, sea stays sea and land stays land (module
+        docstring, "Coasts"). None: no sea.
     """
 
-    def __init__(self, H, extent):
+    def __init__(self, H, extent, sea_level=None):
         H = np.asarray(H, np.float64)
         self.mirror = MirroredRelief(H, extent)
         #: The DEM's mean height and standard deviation (metres).
@@ -98,7 +120,7 @@ class ContinuedRelief:
         self.continued = None
         if self.relief > 0.0 and tile > 0.0 and min(H.shape) >= 2:
             seed = zlib.crc32(np.ascontiguousarray(H).tobytes())
-            self.continued = _continuation(self.mirror, self.box, tile, np.random.default_rng(seed))
+            self.continued = _continuation(self.mirror, self.box, tile, np.random.default_rng(seed), sea_level)
 
     def blur_keeping(self, share: float) -> float:
         """:meth:`.MirroredRelief.blur_keeping` of the DEM."""
@@ -138,9 +160,9 @@ class ContinuedRelief:
         return h
 
 
-def _continuation(mirror, box, tile, rng):
+def _continuation(mirror, box, tile, rng, sea_level=None):
     """The continuation's grid (module docstring) as a :class:`.MirroredRelief` centred
-    on the tile."""
+    on the tile (held to the border's sea and land with ``sea_level``)."""
     x0, y0, x1, y1 = box
     step = tile / GRID_PER_TILE
     counts = [min(GRID_MAX, int(math.ceil((side + 2.0 * GRID_TILES * tile) / step)) + 1)
@@ -172,5 +194,31 @@ def _continuation(mirror, box, tile, rng):
     ranks = np.empty(grid.size, np.float64)
     ranks[np.argsort(grid)] = (np.arange(grid.size) + 0.5) / grid.size
     matched = np.interp(ranks, (np.arange(target.size) + 0.5) / target.size, target).reshape(X.shape)
+    if sea_level is not None:
+        matched = _held_to_the_coast(matched, X, Y, mirror, box, tile, float(sea_level))
     extent = (axes[0][0], axes[1][0], axes[0][-1], axes[1][-1])
     return MirroredRelief(matched, extent)
+
+
+def _held_to_the_coast(h, X, Y, mirror, box, tile, sea_level):
+    """Heights ``h`` at grid points ``(X, Y)`` held below the sea past a sea border and
+    above it past a land border (module docstring, "Coasts")."""
+    from scipy.ndimage import gaussian_filter, map_coordinates
+    H = np.asarray(mirror.levels[0], np.float64)
+    x0, y0, x1, y1 = box
+    ny, nx = H.shape
+    dx, dy = (x1 - x0) / max(nx - 1, 1), (y1 - y0) / max(ny - 1, 1)
+    sea = gaussian_filter((H < sea_level).astype(np.float64), (COAST_BLUR * tile / dy, COAST_BLUR * tile / dx),
+                          mode="nearest")
+    # The share at each point's nearest border point (the tile's own, clamped).
+    j = np.clip((Y - y0) / dy, 0.0, ny - 1.0)
+    i = np.clip((X - x0) / dx, 0.0, nx - 1.0)
+    share = map_coordinates(sea, [j.ravel(), i.ravel()], order=1, mode="nearest").reshape(h.shape)
+    u = np.clip((share - 0.35) / 0.3, 0.0, 1.0)
+    wet = u * u * (3.0 - 2.0 * u)
+    # Folded about the sea level, rounded over the margin (a hyperbola): land that the
+    # mirror put under the sea becomes low hills, not a plain at one height, and hills
+    # it put in the sea become its floor; far from the sea level nothing moves.
+    margin = COAST_MARGIN * mirror.relief
+    fold = np.sqrt((h - sea_level) ** 2 + margin ** 2)
+    return sea_level + (1.0 - 2.0 * wet) * fold

@@ -199,7 +199,7 @@ def _stitch(inner, outer):
     return np.column_stack([a0, third, b0])
 
 
-def far_field_mesh(node, reach=None):
+def far_field_mesh(node, reach=None, sea_level=None):
     """Ground mesh of the far field of a heightfield node (see the module docstring).
 
     Parameters
@@ -208,6 +208,9 @@ def far_field_mesh(node, reach=None):
         A ``heightfield`` or ``implicit_heightfield`` node (world coordinates).
     reach : float, optional
         Distance of the outer ring from the border, metres (default :func:`default_reach`).
+    sea_level : float, optional
+        The sea's level: the ground past a sea border stays under it and past a land
+        border above it (:class:`.ContinuedRelief`, "Coasts").
 
     Returns
     -------
@@ -253,7 +256,7 @@ def far_field_mesh(node, reach=None):
     off = sum(len(v) for v in V[:-1])
     prev = [(off + k, t) for k, t in _loop_sides(corners, len(loop))]
     off += len(loop)
-    relief = ContinuedRelief(H, node.extent)
+    relief = ContinuedRelief(H, node.extent, sea_level)
     sigma = blur_schedule(relief, max(dx, dy))
     for sk in ring_distances(max(dx, dy), reach, 1.0 + 0.7 / DETAIL)[1:]:
         lo, hi = (x0 - sk, y0 - sk), (x1 + sk, y1 + sk)
@@ -370,7 +373,7 @@ class FarField:
 
     def meshes(self) -> list:
         """``[(material, TriangleMesh)]``: the ground, then the sea ring if any."""
-        out = [(self.material, far_field_mesh(self.node, self.reach))]
+        out = [(self.material, far_field_mesh(self.node, self.reach, self.sea_level))]
         if self.sea_level is not None:
             out.append((self.water_material, sea_ring_mesh(self.node.extent, self.sea_level, self.reach)))
         return out

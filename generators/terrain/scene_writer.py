@@ -117,7 +117,8 @@ def toml_text(doc, header=""):
     return "\n".join(out).lstrip("\n") + "\n"
 
 
-def frame_camera(heights, extent, features=None, fov=50.0, elevation=10.0, margin=0.5, aspect=16 / 9):
+def frame_camera(heights, extent, features=None, fov=50.0, elevation=10.0, margin=0.5, aspect=16 / 9,
+                 sea_level=None):
     """A landscape photographer's overview: the features seen from their downhill side, the
     horizon in the frame.
 
@@ -141,6 +142,9 @@ def frame_camera(heights, extent, features=None, fov=50.0, elevation=10.0, margi
         features' extent fills the frame's width.
     aspect : float
         The frame's width over its height.
+    sea_level : float, optional
+        The far field's sea level, where the sea reaches the tile's border (its ground
+        past the tile is held to the border's sea and land: :class:`.ContinuedRelief`).
 
     Returns
     -------
@@ -205,7 +209,7 @@ def frame_camera(heights, extent, features=None, fov=50.0, elevation=10.0, margi
     ahead = az + math.pi + turns  # from the camera towards the target, across the frame
     qx = origin[0] + s * np.cos(ahead)[None]
     qy = origin[1] + s * np.sin(ahead)[None]
-    ground = ContinuedRelief(H, extent).heights(qx.ravel(), qy.ravel(), 0.0).reshape(qx.shape)
+    ground = ContinuedRelief(H, extent, sea_level).heights(qx.ravel(), qy.ravel(), 0.0).reshape(qx.shape)
     rise = max(float(np.max(ground - s * top - origin[2])), 0.0)
     origin[2] += rise
     target = target + np.array([0.0, 0.0, rise])
@@ -375,7 +379,9 @@ def scene_document(result, name, work_dir, progress=None, close=3):
     water = result.water
     wmesh = trimesh.load_mesh(Path(work_dir) / result.water_file, process=False) if result.water_file else None
     feature = result.feature
-    over = frame_camera(H, extent, result.focus)
+    over = frame_camera(H, extent, result.focus,
+                        sea_level=float(water.sea_level) if water is not None and water.wet and water.touches_border
+                        else None)
     overview = {"origin": over["origin"], "target": over["target"], "fov": over["fov"]}
 
     def sun_views(first):
