@@ -26,9 +26,12 @@ cast's free stretches hold no hit. A cast starts ``NUDGE`` leaf edges past ``t``
 the ray would never move); the stretch skipped so is outside the cover unless the
 ray enters and leaves it again within that length, which needs a cover thinner than
 ``NUDGE`` leaves along the ray: only at a cell's edge or corner, where the field is
-within the tolerance plus ``L NUDGE h`` of an air cell's value. A cast that reports a
-face the ray's state does not expect (it leaves where it should enter: the ray
-tracer missed an entry at an edge) only makes the ray trace more.
+within the tolerance plus ``L NUDGE h`` of an air cell's value. A ray's state is
+read from the face it meets (entering or leaving), so a ray tracer that missed a
+face could take the inside for the outside; each face therefore reaches ``GROW``
+leaf edges past its edges, so that faces meeting at an edge (or at a T-junction of
+merged rectangles) overlap and no ray slips between them. A face met in that
+overlap only makes the ray trace more.
 
 Footprints. The cover holds for the footprint fields of every class of the cells
 (radius up to ``rho_K``); a ray whose cone outgrows that (a wide bounce far from its
