@@ -47,9 +47,10 @@ slower (``render_cover_vs_sphere``: goblins, arch bridge and every_generator 1.1
 costs (~100 ns a ray), a packet casts whenever one of its lanes does, the cover is
 thick where the cells' bounds are loose (goblins: 16 candidate leaves of 4 m a column
 at the median) and shadow and bounce rays spend their steps leaving the surface they
-start on, inside the cover. Finer leaves cut camera steps further (arch bridge 26.1
--> 19.9 at 256 leaves, 12.1 at 512) but not shadow or bounce steps, and take 8.5 s
-to build at 512. Where a ray tracer is cheap beside the field's arithmetic (a GPU's
+start on, inside the cover. Finer leaves cut camera steps further (arch bridge
+camera / shadow / bounce 26.1 / 22.6 / 20.1 -> 21.1 / 20.3 / 17.9 at 256 leaves, 13.0
+/ 18.2 / 17.8 at 512) but hardly shadow or bounce steps, and take 8.7 s to build at
+512. Where a ray tracer is cheap beside the field's arithmetic (a GPU's
 RT cores) the balance may differ: the benchmark measures it.
 
 References
