@@ -30,12 +30,13 @@ Coasts
     With a sea level, the tile's border decides what lies past it: where the border
     (the tile's share of sea within :data:`COAST_BLUR` ``T`` of its nearest border
     point) is sea, the continuation is folded below the sea; where it is land, above
-    it (``z + / - sqrt((h - z)^2 + m^2)``, ``z`` the sea level, ``m`` a margin: heights far
-    from the sea stay, and what the mirror put on the wrong side of it comes back as
-    low hills or as sea floor); where the coast crosses the border, the two fade into
-    each other across that share's 0.35-0.65. The mirror put a coast's land again a tile out to sea (a
-    phantom far shore across an ocean, and a sea a tile inland): a coast continues
-    as sea and land, its coastline running on from where it leaves the tile.
+    it (``z -/+ sqrt((h - z)^2 + m^2)``, ``z`` the sea level, ``m`` :data:`COAST_MARGIN`
+    of the DEM's height deviation: heights far from the sea stay, and what the mirror put on
+    the wrong side of it comes back as low hills or as sea floor). Where the coast
+    crosses the border the two fade into each other over that share's 0.35-0.65, and
+    the ground there flattens towards the sea level: the coastline runs on from where
+    it leaves the tile, along a low strip. (The mirror put a coast's land again a
+    tile out to sea, a far shore across an ocean, and a sea a tile inland.)
 
 The continuation is a grid of spacing about ``T /`` :data:`GRID_PER_TILE` reaching
 :data:`GRID_TILES` tiles past the tile on every side (mirrored beyond, where the far
@@ -62,7 +63,7 @@ import numpy as np
 
 from .mirrored_relief import MirroredRelief
 
-__all__ = ["ContinuedRelief", "BAND", "LOW_BLUR", "GRID_PER_TILE", "COAST_BLUR"]
+__all__ = ["ContinuedRelief", "BAND", "LOW_BLUR", "GRID_PER_TILE", "COAST_BLUR", "COAST_MARGIN"]
 
 #: Where the continuation takes over from the mirror, in tiles (the shorter side) from
 #: the border: the mirror alone within ``BAND[0]``, the continuation alone past ``BAND[1]``.
