@@ -204,6 +204,12 @@ class _ImplicitPathImpl:
 
         p, n = dr.if_stmt((ray.o, ray.d, t, cone or ()), hit, on_surface,
                           lambda o, d, t, cone: (mi.Point3f(o + d * t), mi.Vector3f(-d)), label="field_surface")
+        # The field stops up to its hit tolerance off its surface, in front of a mesh lying
+        # on it (a far field's frame, a few centimetres over the DEM's border band), and
+        # its hit is then projected onto the surface: behind that mesh, which then blocked
+        # every ray leaving the point (a black line along the tile's border). Where the
+        # projected point lies behind the mesh's hit, the mesh is what the ray sees.
+        hit &= ~(si.is_valid() & (dr.dot(p - ray.o, ray.d) > si.t))
         # Lift the point off the surface so that rays spawned here start in air: a
         # tenth of the hit tolerance, at least a few float32 ulps of the position (a
         # fixed fraction of the scene's size would be metres on a 1000 km tile).
