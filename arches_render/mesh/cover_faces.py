@@ -27,12 +27,12 @@ __all__ = ["boundary_quads", "quads_to_triangles"]
 
 
 def _rectangles(plane):
-    """Greedy cover of the ``True`` cells of a 2-D boolean array by disjoint rectangles:
-    ``(row, col, rows, cols)`` arrays. Runs along each row are merged first, then a
-    run is grown down over the rows below while they hold the same run."""
+    """Greedy cover of the ``True`` cells of a 2-D boolean array by disjoint rectangles: a
+    list of ``(row, col, rows, cols)``. Each run of a row still uncovered is grown down
+    over the rows below while they are ``True`` along its whole length."""
     plane = plane.copy()
     out = []
-    nr, nc = plane.shape
+    nr = plane.shape[0]
     for r in range(nr):
         row = plane[r]
         if not row.any():
