@@ -19,7 +19,11 @@ a worker process importing one module of the package imports no more than it nee
                    dicts (``parse`` may add one). An item renders as
                    ``item.shapes(bsdfs, progress=None)`` (Mitsuba shapes) and exports to
                    USD as ``item.point_instancer()`` (see
-                   :func:`arches_render.mesh.usd_export.write_usd_stage`).
+                   :func:`arches_render.mesh.usd_export.write_usd_stage`). An item whose
+                   shapes surround the scene (a far field) may say where they lie,
+                   ``item.ray_region() -> (hole, z0, z1)``: outside the open column over
+                   the rectangle ``hole``, between heights ``z0`` and ``z1``; rays that
+                   cannot reach there skip them (:mod:`arches_render.render.mesh_region`).
 ``COMMANDS``       names of the package's modules defining ``register(subparsers)``:
                    ``arches-render`` subcommands (see :mod:`arches_render.commands`).
                    Names, not modules: only the CLI imports them, so loading a scene

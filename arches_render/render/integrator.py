@@ -15,6 +15,11 @@ field with the sphere tracer), multiple importance sampling with the power
 heuristic between emitter and BSDF sampling, and Russian roulette from depth
 ``rr_depth`` with continuation probability ``min(max(beta) eta^2, 0.95)``.
 
+Mitsuba's query costs a few field steps a ray against a far field's skirt, so rays
+that provably meet no mesh skip it (:mod:`.mesh_region`): the shapes inside the scene
+are asked before the field (a hit there shortens the field's trace), the far field's
+skirt after it, up to the field's hit.
+
 Python cannot subclass ``mi.Shape`` (only meshes), so the field travels next to
 the scene: :meth:`ImplicitPathIntegrator.attach` gives it to the integrator after
 ``mi.load_dict``. ``mi.SamplingIntegrator`` exists per variant, so the class is
@@ -120,6 +125,7 @@ class _ImplicitPathImpl:
         self.field_bsdf = None
         self.shaded_bsdf = None
         self.atmosphere = None
+        self.mesh_region = None
         self.set_pixel_angle(0.0)
 
     def attach(self, field, bsdf, sun=None):
@@ -149,6 +155,32 @@ class _ImplicitPathImpl:
             on the field's mesh. ``None``: every BSDF is called as Mitsuba's are.
         """
         self.shaded_bsdf = bsdf
+
+    def attach_mesh_region(self, region):
+        """Skip the mesh queries of rays that provably meet no mesh: ``region``, a grown
+        :class:`~.mesh_region.MeshRegion` holding the scene's shapes (None: query every ray)."""
+        self.mesh_region = region
+
+    def mesh_lanes(self, ray, active):
+        """The lanes of ``active`` whose rays may meet a mesh before the field is traced:
+        with a field, those that may meet the region's box (the shapes inside the scene:
+        a mesh hit there spares the field's steps past it); the skirt (a far field, behind
+        the tile's field) is asked after the field, with the ray cut at its hit
+        (:meth:`skirt_lanes`). Without a field, any part of the region."""
+        region = self.mesh_region
+        if region is None:
+            return active
+        if self.tracer is None:
+            return active & region.may_meet(ray.o, ray.d, ray.maxt)
+        return active & region.may_meet_box(ray.o, ray.d, ray.maxt)
+
+    def skirt_lanes(self, ray, tmax, active):
+        """The lanes of ``active`` whose segments ``[0, tmax]`` may meet the region's skirt
+        (None: no skirt to ask after the field)."""
+        region = self.mesh_region
+        if region is None or region.skirt is None or self.tracer is None:
+            return None
+        return active & region.may_meet_skirt(ray.o, ray.d, tmax)
 
     def attach_atmosphere(self, atmosphere):
         """Fog every path segment with an :class:`~arches_render.render.atmosphere.Atmosphere` (None: off)."""
@@ -189,10 +221,10 @@ class _ImplicitPathImpl:
             The hit, whether it is on the field, and the field query's result
             (:class:`~.march.TraceResult`; None without a field).
         """
-        si = scene.ray_intersect(ray, mi.RayFlags.All, coherent=False, active=active)
-        si = facing_shading_frame(si, ray.d)  # no black lines below a mesh's silhouettes
+        asked = self.mesh_lanes(ray, active)
+        si = scene.ray_intersect(ray, mi.RayFlags.All, coherent=False, active=asked)
         if self.tracer is None:
-            return si, mi.Bool(False), None
+            return facing_shading_frame(si, ray.d), mi.Bool(False), None
         tmax = dr.select(si.is_valid(), si.t, ray.maxt)
         res = self.tracer.query(ray.o, ray.d, tmax, active, cone)
         hit, t = res.hit, res.t
@@ -204,6 +236,14 @@ class _ImplicitPathImpl:
 
         p, n = dr.if_stmt((ray.o, ray.d, t, cone or ()), hit, on_surface,
                           lambda o, d, t, cone: (mi.Point3f(o + d * t), mi.Vector3f(-d)), label="field_surface")
+        # The skirt (a far field) is asked after the field, up to the field's projected
+        # hit (the rule below), by the lanes not asked yet whose segment may reach it.
+        t_end = dr.select(hit, dr.dot(p - ray.o, ray.d), tmax)
+        late = self.skirt_lanes(ray, t_end, active & ~asked)
+        if late is not None:
+            cut = mi.Ray3f(ray.o, ray.d, t_end, ray.time, ray.wavelengths)
+            si = dr.select(late, scene.ray_intersect(cut, mi.RayFlags.All, coherent=False, active=late), si)
+        si = facing_shading_frame(si, ray.d)  # no black lines below a mesh's silhouettes
         # The field stops up to its hit tolerance off its surface, in front of a mesh lying
         # on it (a far field's frame, a few centimetres over the DEM's border band), and
         # its hit is then projected onto the surface: behind that mesh, which then blocked
@@ -228,11 +268,16 @@ class _ImplicitPathImpl:
     def occluded(self, scene, ray, active, cone=None):
         """Shadow-ray test against meshes and the field (``cone`` as for :meth:`intersect`);
         returns ``(blocked, TraceResult or None)``."""
-        blocked = scene.ray_test(ray, active)
+        asked = self.mesh_lanes(ray, active)
+        blocked = scene.ray_test(ray, asked)
         if self.tracer is None:
             return blocked, None
         res = self.tracer.query(ray.o, ray.d, ray.maxt, active & ~blocked, cone, any_hit=True)
-        return blocked | res.hit, res
+        blocked |= res.hit
+        late = self.skirt_lanes(ray, ray.maxt, active & ~asked & ~blocked)  # the far field last
+        if late is not None:
+            blocked |= scene.ray_test(ray, late)
+        return blocked, res
 
     def bsdf_at(self, si, ray, field_hit):
         if self.tracer is None:

@@ -32,6 +32,7 @@ from ..mesh.polygonize import polygonize
 from ..scene.material_keys import FIELD_ROOT
 from .aovs import split_channels
 from .atmosphere import Atmosphere
+from .mesh_region import scene_mesh_region
 from .plugins import ensure_registered
 from .sun_columns import scene_sun
 
@@ -315,6 +316,7 @@ def build_scene(desc, geometry=None, width=None, height=None, voxel=None, progre
         d["field_mesh"], _ = field_mesh_shape(desc, field_bsdf, voxel, progress)
     scene = mi.load_dict(d)
     attach_field(scene.integrator(), desc, geometry, field_bsdf)
+    attach_mesh_region(scene, desc)
     # Clip planes for the whole scene, meshes included (a far-field ring reaches the
     # horizon): an edit before the first render compiles nothing more.
     near, far = clip_planes(*scene_box(desc, scene.bbox()))
@@ -392,9 +394,19 @@ def scene_integrator(scene, desc, geometry, bsdfs, aovs=False, moments=False, wi
     field_bsdf = bsdfs[desc.field_material] if desc.field is not None else None
     integrator = mi.load_dict(integrator_dict(desc, geometry, field_bsdf, aovs, moments))
     attach_field(integrator, desc, geometry, field_bsdf)
+    attach_mesh_region(scene, desc, integrator)
     attach_atmosphere(scene, desc, integrator)
     set_pixel_spread(scene, desc.camera.fov, width, integrator)
     return integrator
+
+
+def attach_mesh_region(scene, desc, integrator=None) -> None:
+    """Tell a built scene's integrator (or ``integrator``) where its meshes lie, so that rays
+    that cannot meet one skip Mitsuba's query (:mod:`.mesh_region`; ``implicit_path`` only)."""
+    integrator = integrator or scene.integrator()
+    if hasattr(integrator, "attach_mesh_region"):
+        items = [item for items in desc.tables.values() for item in items]
+        integrator.attach_mesh_region(scene_mesh_region(scene, items))
 
 
 def attach_atmosphere(scene, desc, integrator=None) -> None:

@@ -55,7 +55,7 @@ Scene table (``[[far_field]]``, one per heightfield)::
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import mitsuba as mi
 import numpy as np
@@ -66,7 +66,7 @@ from arches_render.mesh.triangles import face_normals, merged_vertices, vertex_n
 
 from .continued_relief import ContinuedRelief
 
-__all__ = ["FarField", "blur_schedule", "far_field_mesh", "sea_ring_mesh", "ring_distances", "parse_far_field", "default_reach"]
+__all__ = ["FarField", "blur_schedule", "far_field_mesh", "frame_band", "sea_ring_mesh", "ring_distances", "parse_far_field", "default_reach"]
 
 _GROWTH = 1.35  # ring distance ratio (the sea's rings)
 
@@ -199,6 +199,19 @@ def _stitch(inner, outer):
     return np.column_stack([a0, third, b0])
 
 
+def frame_band(node) -> tuple[int, int]:
+    """Width of the frame (module docstring) in DEM cells along x and y: one cell past the
+    falloff radius ``R`` of an ``implicit_heightfield``, ``(0, 0)`` for a plain one."""
+    R = getattr(node, "R_np", None)
+    if R is None:
+        return 0, 0
+    ny, nx = node.heights_np.shape
+    x0, y0, x1, y1 = node.extent
+    dx, dy = (x1 - x0) / (nx - 1), (y1 - y0) / (ny - 1)
+    return (min(int(math.ceil(R / dx - 1e-9)) + 1, (nx - 1) // 2),
+            min(int(math.ceil(R / dy - 1e-9)) + 1, (ny - 1) // 2))
+
+
 def far_field_mesh(node, reach=None, sea_level=None):
     """Ground mesh of the far field of a heightfield node (see the module docstring).
 
@@ -225,11 +238,9 @@ def far_field_mesh(node, reach=None, sea_level=None):
     V, F = [], []
 
     # Frame (implicit heightfields): the DEM's samples in the outer band, one cell past the seam.
-    R = getattr(node, "R_np", None)
     lift = np.zeros_like(H)
-    if R is not None:
-        bi = min(int(math.ceil(R / dx - 1e-9)) + 1, (nx - 1) // 2)
-        bj = min(int(math.ceil(R / dy - 1e-9)) + 1, (ny - 1) // 2)
+    bi, bj = frame_band(node)
+    if bi or bj:
         twist = np.abs(H[:-1, :-1] - H[:-1, 1:] - H[1:, :-1] + H[1:, 1:]) / 4.0
         for sj in (slice(0, -1), slice(1, None)):
             for si in (slice(0, -1), slice(1, None)):
@@ -365,6 +376,7 @@ class FarField:
     reach: float
     sea_level: float | None = None
     water_material: str | None = None
+    _meshes: list | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def name(self) -> str:
@@ -372,11 +384,24 @@ class FarField:
         return f"far_field{self.index}"
 
     def meshes(self) -> list:
-        """``[(material, TriangleMesh)]``: the ground, then the sea ring if any."""
-        out = [(self.material, far_field_mesh(self.node, self.reach, self.sea_level))]
-        if self.sea_level is not None:
-            out.append((self.water_material, sea_ring_mesh(self.node.extent, self.sea_level, self.reach)))
-        return out
+        """``[(material, TriangleMesh)]``: the ground, then the sea ring if any (built once)."""
+        if self._meshes is None:
+            out = [(self.material, far_field_mesh(self.node, self.reach, self.sea_level))]
+            if self.sea_level is not None:
+                out.append((self.water_material, sea_ring_mesh(self.node.extent, self.sea_level, self.reach)))
+            self._meshes = out
+        return self._meshes
+
+    def ray_region(self) -> tuple:
+        """``(hole, z0, z1)``: the far field lies between heights ``z0`` and ``z1`` outside the
+        open column over ``hole``, the tile less its frame band
+        (:mod:`arches_render.render.mesh_region`: rays that cannot meet it skip it)."""
+        bi, bj = frame_band(self.node)
+        ny, nx = self.node.heights_np.shape
+        x0, y0, x1, y1 = self.node.extent
+        dx, dy = (x1 - x0) / (nx - 1), (y1 - y0) / (ny - 1)
+        z = np.concatenate([m.vertices[:, 2] for _, m in self.meshes()])
+        return (x0 + bi * dx, y0 + bj * dy, x1 - bi * dx, y1 - bj * dy), float(z.min()), float(z.max())
 
     def shapes(self, bsdfs: dict, progress=None) -> list:
         """Mitsuba meshes of the far field with their BSDFs from ``bsdfs``."""
