@@ -15,8 +15,8 @@ The region is the union of
 - a **box** holding every shape that no scene item claims (rock piles, mesh files,
   the field's own mesh in mesh mode), and
 - a **skirt**: the points between heights ``z0`` and ``z1`` outside the open column
-  over the rectangle ``hole`` (items with ``ray_region()``, :mod:`arches_render.extensions`:
-  a far field's hole is the tile less its frame band, :class:`generators.terrain.far_field.FarField`).
+  over the rectangle ``hole`` (scene items with ``ray_region()``, :mod:`arches_render.extensions`:
+  a far field's hole is its tile less the frame band its mesh covers inside the tile).
 
 A ray segment ``o + t d``, ``t in [0, tmax]``, may meet a mesh only where it meets
 the region:
@@ -28,9 +28,12 @@ the region:
   spends over the hole. The ray misses the skirt if ``S`` is empty or lies inside
   ``(ha, hb)``.
 
-Every test is written as "certainly misses" with ordered comparisons, so a NaN (a ray
-lying in a slab's plane, ``0 * inf``) keeps the lane tested. Both parts are grown by
-:data:`MARGIN` of the coordinates' magnitude: Mitsuba stores vertices in float32.
+Every test is written as "certainly misses" with ordered comparisons, so a NaN reaching
+the last comparison keeps the lane asked. (A ray lying exactly in a slab's plane gives
+``0 * inf``; where ``minimum``/``maximum`` drop that NaN, the box's test reads the ray as
+missing, right since the grown box's faces touch no mesh, and the skirt's as meeting.)
+Both parts are grown by :data:`MARGIN` of the coordinates' magnitude: Mitsuba stores
+vertices in float32.
 
 The bounds are opaque Dr.Jit values: every scene with a far field shares one kernel.
 
