@@ -174,3 +174,17 @@ def test_renders_alike_with_and_without_the_region(tmp_path):
     without = np.asarray(render_layers(scene, 2, seed=5)[0])
     assert np.array_equal(with_region, without)
     assert with_region[..., :3].mean() > 0.01
+
+
+def test_mesh_mode_renders_alike_with_and_without_the_region(tmp_path):
+    """In mesh mode (``implicit_path`` without a field: the field's mesh lies in the region's
+    box, the far field in its skirt, both asked in one query) the picture is the same, bit
+    for bit, with and without the region."""
+    scene = build_scene(_desc(tmp_path), geometry="mesh", voxel=4.0, aovs=True)
+    integrator = scene.integrator()
+    assert integrator.mesh_region is not None and integrator.mesh_region.box is not None
+    with_region = np.asarray(render_layers(scene, 2, seed=5)[0])
+    integrator.attach_mesh_region(None)
+    without = np.asarray(render_layers(scene, 2, seed=5)[0])
+    assert np.array_equal(with_region, without)
+    assert with_region[..., :3].mean() > 0.01
