@@ -12,7 +12,9 @@ Cameras
     centroid of the generated primitives, else the terrain's centre) from
     *downhill* (the sea, the valley), so that cliffs, caves and canyon walls face
     the camera; far enough to frame most features, ``el`` degrees above the
-    target, and never below the terrain under it.
+    target, and never below the terrain under it. A target on an isolated landform
+    (a volcanic cone, a butte: :func:`landform_view`) is framed with the landform
+    whole, from outside its footprint, aimed at its middle height.
 Sun
     ``sunsky`` at 35 degrees, 55 degrees round from the first camera's azimuth:
     grazing enough to model overhangs with shadow, bright enough to see into caves.
@@ -161,9 +163,10 @@ def frame_camera(heights, extent, features=None, fov=50.0, elevation=10.0, margi
 
     Low and close, as a photographer stands (issue 34): the default 10 degrees and half
     the framing distance put the landforms in the foreground and middle distance with
-    the relief receding to a horizon in haze. The aerial view it replaced (16-32 degrees
-    by preset, from 1.2 times the framing distance) showed the tile from above as a
-    model on a table, its edges and the far field around it in view.
+    the relief receding to a horizon in haze. Where the target lies on an isolated
+    landform the camera steps back out of it (:func:`landform_view`). The aerial view
+    it replaced (16-32 degrees by preset, from 1.2 times the framing distance) showed the
+    tile from above as a model on a table, its edges and the far field around it in view.
     """
     from scipy.ndimage import gaussian_filter
     H = np.asarray(heights, dtype=np.float64)
@@ -193,6 +196,11 @@ def frame_camera(heights, extent, features=None, fov=50.0, elevation=10.0, margi
         az = math.atan2(sy, sx)
     az += math.radians(40.0)  # well off the axis: faces parallel to the view get relief
     dist = margin * half / math.tan(math.radians(fov) / 2)
+    landform = landform_view(H, extent, target, az, fov)
+    if landform is not None:
+        # Aimed at the landform's middle height (a crater's floor hides behind its rim).
+        dist = max(dist, landform[0])
+        target[2] = max(target[2], landform[1])
     el = math.radians(elevation)
     origin = target + dist * np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
     # Keep the camera above the ground under it (clamped lookup for points off the tile).
@@ -216,6 +224,85 @@ def frame_camera(heights, extent, features=None, fov=50.0, elevation=10.0, margi
     view = target - origin
     return dict(origin=[float(v) for v in origin], target=[float(v) for v in target], fov=float(fov),
                 azimuth=math.degrees(math.atan2(view[1], view[0])))
+
+
+#: The level, as a fraction of the tile's relief, above which the ground around the target
+#: is a landform the overview frames from outside (:func:`landform_view`).
+LANDFORM_LEVEL = 0.5
+
+#: How much of the frame's width an isolated landform's footprint spans at the target.
+LANDFORM_FILL = 0.9
+
+#: How far past the landform's footprint the camera stands, as a fraction of its distance.
+LANDFORM_CLEARANCE = 0.15
+
+#: The camera stays over the tile: at most this fraction of the way to its border.
+TILE_INSET = 0.95
+
+
+def landform_view(heights, extent, target, azimuth, fov):
+    """How far from ``target`` along ``azimuth`` an overview frames the isolated landform
+    the target lies on, and at what height it aims; ``None`` where it lies on none.
+
+    The landform is the ground above :data:`LANDFORM_LEVEL` of the tile's relief that
+    holds the target's cell, with its enclosed hollows (a crater, a caldera) counted in;
+    it is *isolated* when it does not reach the tile's border (a volcanic cone, a
+    butte, an island). A photographer frames such a landform whole, from outside it:
+    at half the framing distance of its features the overview of a 600 m volcano stood
+    on its flank, the rim in front hiding the crater. So the camera stands where the
+    footprint's equivalent disc spans :data:`LANDFORM_FILL` of the frame's width, and
+    past the footprint's far edge along ``azimuth`` by :data:`LANDFORM_CLEARANCE`; never
+    past :data:`TILE_INSET` of the way to the tile's border (the far field in the
+    foreground reads as a seam). Relief that runs off the tile (a range, a plateau cut
+    by canyons) has no outside to stand on and is left to the features' framing.
+
+    Parameters
+    ----------
+    heights : numpy.ndarray
+        ``(ny, nx)`` elevations over ``extent``.
+    extent : sequence of 4 floats
+        ``(x0, y0, x1, y1)``.
+    target : sequence of 3 floats
+        The point the overview looks at.
+    azimuth : float
+        Direction from the target towards the camera, radians.
+    fov : float
+        Horizontal field of view, degrees.
+
+    Returns
+    -------
+    (float, float) or None
+        The distance in metres, and the median height of the footprint (where a
+        crater's floor, hidden behind its rim from a low camera, does not pull the
+        aim down).
+    """
+    from scipy.ndimage import binary_fill_holes, label
+    H = np.asarray(heights, dtype=np.float64)
+    ny, nx = H.shape
+    x0, y0, x1, y1 = extent
+    dx, dy = (x1 - x0) / (nx - 1), (y1 - y0) / (ny - 1)
+    zlo, zhi = float(H.min()), float(H.max())
+    i, j = int(round((target[0] - x0) / dx)), int(round((target[1] - y0) / dy))
+    if not (zhi > zlo and 0 <= i < nx and 0 <= j < ny):
+        return None
+    labels, _ = label(binary_fill_holes(H >= zlo + LANDFORM_LEVEL * (zhi - zlo)))
+    own = labels[j, i]
+    border = np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]])
+    if own == 0 or np.any(border == own):
+        return None
+    footprint = labels == own
+    radius = math.sqrt(np.count_nonzero(footprint) * dx * dy / math.pi)
+    dist = radius / (LANDFORM_FILL * math.tan(math.radians(fov) / 2))
+    # The footprint's far edge along the azimuth (samples half a cell apart), and the tile's.
+    c, s_ = math.cos(azimuth), math.sin(azimuth)
+    to_border = min((x1 - target[0]) / c if c > 0 else (x0 - target[0]) / c if c < 0 else np.inf,
+                    (y1 - target[1]) / s_ if s_ > 0 else (y0 - target[1]) / s_ if s_ < 0 else np.inf)
+    s = np.arange(0.0, to_border, 0.5 * min(dx, dy))
+    on = labels[np.round((target[1] + s * s_ - y0) / dy).astype(int),
+                np.round((target[0] + s * c - x0) / dx).astype(int)] == own
+    edge = float(s[np.flatnonzero(on)[-1]]) if on.any() else 0.0
+    return (min(max(dist, edge * (1.0 + LANDFORM_CLEARANCE)), TILE_INSET * to_border),
+            float(np.median(H[footprint])))
 
 
 def sun_for(views, elevation=35.0, turn=55.0):
