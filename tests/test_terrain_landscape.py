@@ -508,13 +508,15 @@ def test_mountains_and_a_volcanic_cone_amplify_into_landscapes(tmp_path, capsys,
 
 
 def test_snow_and_rock_follow_the_lands_rise_not_the_sea_floor():
-    from arches_render.generators.terrain.scene_writer import ALPINE_RELIEF, landscape_material
+    from arches_render.generators.terrain.scene_writer import ALPINE_RELIEF, SNOW_RELIEF, landscape_material
     snow = lambda *a: landscape_material(*a)["overrides"]["snow.height_min"]  # noqa: E731
     assert snow(-2000.0, 300.0, 0.0) > 300.0           # a 300 m island over a deep sea: no snow
-    assert snow(-100.0, 450.0, 0.0) == 450.0 - 0.05 * 450.0   # a coastal range: its top 5 %
+    assert snow(-100.0, 450.0, 0.0) > 450.0            # a coastal range: none either
+    assert snow(1198.0, 1529.0) > 1529.0               # nor desert mesas 330 m high (white caprock)
+    assert snow(-100.0, 1200.0, 0.0) == 1200.0 - 0.05 * 1200.0  # a mountain range: its top 5 %
     assert snow(502.0, 4216.0) == 4216.0 - 0.25 * 3714.0     # high mountains: the top quarter
     assert snow(-1437.0, 2205.0, 0.0) == 2205.0 - 0.25 * 2205.0  # mountains behind a deep sea
-    assert ALPINE_RELIEF == 1500.0
+    assert ALPINE_RELIEF == 1500.0 and SNOW_RELIEF == 1000.0
 
 
 def test_rock_texture_of_sea_cliffs_grows_with_them():

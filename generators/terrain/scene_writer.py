@@ -368,6 +368,10 @@ STRATA_PALETTE = {"sea": "limestone", "river": "sandstone", "karst": "limestone"
 SUN_CLEAR = 60.0
 #: A relief (m) from which a DEM is dressed as high mountains (:func:`landscape_material`).
 ALPINE_RELIEF = 1500.0
+#: A rise of the land (m) from which its top is snowed on (:func:`landscape_material`): below
+#: it, hills, mesas and coastal ranges (the eroded mesas' 330 m caprock came out as white
+#: sheets of snow, Montara Mountain's 590 m above the Pacific with a snow cap).
+SNOW_RELIEF = 1000.0
 
 #: The rock texture's tile (m) per metre of the DEM's cliff height on sea cliffs, and
 #: its range (:func:`landscape_material`). The ``terrain`` preset's 6 m tile, made for a
@@ -387,8 +391,9 @@ def landscape_material(zlo, zhi, sea_level=None, geology=None, box=None, preset=
 
     Sand covers low flats (up to 12 % of the relief, or a little above sea level),
     grass gentle slopes from 10 % to 75 %, and snow only the top 5 % of land rising
-    more than 300 m above the DEM's floor or the sea (a 300 m island over a 2 km deep
-    sea floor was snowed on its top 115 m). High mountains (land rising
+    :data:`SNOW_RELIEF` or more above the DEM's floor or the sea (a 300 m island over a
+    2 km deep sea floor was snowed on its top 115 m; with 300 m, desert mesas were
+    capped with snow). High mountains (land rising
     :data:`ALPINE_RELIEF` or more: the Aletsch DEM's 3.7 km came out as orange
     sandstone bands under 200 m of snow) get snow on the top quarter of that rise and
     grey rock (the ``limestone`` palette) whatever the preset. With ``geology`` (the
@@ -408,7 +413,7 @@ def landscape_material(zlo, zhi, sea_level=None, geology=None, box=None, preset=
         "sand.height_max": sand_top, "sand.height_soft": 0.04 * relief,
         "grass.height_min": zlo + 0.10 * relief, "grass.height_max": zlo + 0.75 * relief,
         "grass.height_soft": 0.05 * relief,
-        "snow.height_min": zhi - (0.25 if alpine else 0.05) * land if land > 300 else zhi + relief,
+        "snow.height_min": zhi - (0.25 if alpine else 0.05) * land if land >= SNOW_RELIEF else zhi + relief,
         "snow.height_soft": 0.02 * relief,
     }
     if cliff_height and preset == "sea":
