@@ -519,6 +519,24 @@ def test_snow_and_rock_follow_the_lands_rise_not_the_sea_floor():
     assert ALPINE_RELIEF == 1500.0 and SNOW_RELIEF == 1000.0
 
 
+
+def test_grass_covers_flat_tops_and_leaves_rims_and_peaks_bare():
+    """Flat-topped relief without snow (mesas, canyon plateaus) gets grass to its top: bare,
+    its caprock crossed its beds in camouflage blotches; a cone's rim, ridges and snowy
+    mountains keep bare rock above three quarters of their relief."""
+    from arches_render.generators.terrain.scene_writer import flat_topped, landscape_material
+    grass = lambda *a, **k: landscape_material(*a, **k)["overrides"]["grass.height_max"]  # noqa: E731
+    assert grass(1198.0, 1529.0, flat_top=True) > 1529.0
+    assert grass(1198.0, 1529.0) == 1198.0 + 0.75 * 331.0
+    assert grass(-100.0, 1200.0, 0.0, flat_top=True) == -100.0 + 0.75 * 1300.0  # snow caps it
+    x = np.arange(0.0, 3000.0, 20.0)
+    X, Y = np.meshgrid(x, x)
+    r = np.hypot(X - 1500.0, Y - 1500.0)
+    mesa = 1200.0 + 300.0 * np.clip((900.0 - r) / 60.0, 0.0, 1.0)   # flat top, steep sides
+    cone = 1200.0 + 300.0 * np.clip(1.0 - r / 900.0, 0.0, 1.0)      # 18 degree flanks
+    assert flat_topped(mesa, 20.0) and not flat_topped(cone, 20.0)
+
+
 def test_rock_texture_of_sea_cliffs_grows_with_them():
     """On the sea preset the rock texture's tile is a fifth of the DEM's cliff height,
     within 6-30 m: sea cliffs 98 m high get 19.6 m (the preset's 6 m drew a dry-stone wall

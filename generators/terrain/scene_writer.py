@@ -385,12 +385,36 @@ ROCK_TILE_PER_CLIFF = 0.2
 ROCK_TILE_RANGE = (6.0, 30.0)
 
 
+#: Slope (degrees) below which ground holds soil, and the share of a relief's top quarter
+#: that must be that flat for grass to cover its top (:func:`flat_topped`).
+FLAT_SLOPE = 5.0
+FLAT_TOP_SHARE = 0.5
+
+
+def flat_topped(heights, cell) -> bool:
+    """Whether a relief is flat-topped: at least :data:`FLAT_TOP_SHARE` of the ground above
+    three quarters of its relief slopes less than :data:`FLAT_SLOPE` degrees (mesas and
+    canyon plateaus: 0.54-0.81 of the shipped DEMs; a volcanic cone, ridges, mountains:
+    0.02-0.10)."""
+    H = np.asarray(heights, dtype=np.float64)
+    zlo, zhi = float(H.min()), float(H.max())
+    if not zhi > zlo or min(H.shape) < 2:
+        return False
+    gy, gx = np.gradient(H, float(cell))
+    top = H >= zlo + 0.75 * (zhi - zlo)
+    flat = np.hypot(gx, gy)[top] < math.tan(math.radians(FLAT_SLOPE))
+    return bool(flat.mean() >= FLAT_TOP_SHARE)
+
+
 def landscape_material(zlo, zhi, sea_level=None, geology=None, box=None, preset=None, cell=1.0,
-                       cliff_height=None):
+                       cliff_height=None, flat_top=False):
     """The ``terrain`` triplanar preset with layer heights fitted to ``[zlo, zhi]``.
 
     Sand covers low flats (up to 12 % of the relief, or a little above sea level),
-    grass gentle slopes from 10 % to 75 %, and snow only the top 5 % of land rising
+    grass gentle slopes from 10 % to 75 % (bare rock above: a cone's rim, ridges and peaks),
+    or to the top of a ``flat_top`` relief without snow (:func:`flat_topped`: mesas and
+    canyon plateaus, whose bare tops crossed their beds in camouflage blotches), and
+    snow only the top 5 % of land rising
     :data:`SNOW_RELIEF` or more above the DEM's floor or the sea (a 300 m island over a
     2 km deep sea floor was snowed on its top 115 m; with 300 m, desert mesas were
     capped with snow). High mountains (land rising
@@ -409,11 +433,13 @@ def landscape_material(zlo, zhi, sea_level=None, geology=None, box=None, preset=
     land = zhi - (zlo if sea_level is None else max(zlo, sea_level))
     alpine = land >= ALPINE_RELIEF
     sand_top = zlo + 0.12 * relief if sea_level is None else sea_level + 0.06 * relief
+    snowy = land >= SNOW_RELIEF
+    grass_top = zhi + relief if flat_top and not snowy else zlo + 0.75 * relief
     over = {
         "sand.height_max": sand_top, "sand.height_soft": 0.04 * relief,
-        "grass.height_min": zlo + 0.10 * relief, "grass.height_max": zlo + 0.75 * relief,
+        "grass.height_min": zlo + 0.10 * relief, "grass.height_max": grass_top,
         "grass.height_soft": 0.05 * relief,
-        "snow.height_min": zhi - (0.25 if alpine else 0.05) * land if land >= SNOW_RELIEF else zhi + relief,
+        "snow.height_min": zhi - (0.25 if alpine else 0.05) * land if snowy else zhi + relief,
         "snow.height_soft": 0.02 * relief,
     }
     if cliff_height and preset == "sea":
@@ -500,7 +526,8 @@ def scene_document(result, name, work_dir, progress=None, close=3):
         "lights": [sun_for(sun_views(shots[0] if shots else None))],
         "materials": {"landscape": landscape_material(zlo, zhi, result.sea_level, *_geology(result),
                                                       preset=result.preset, cell=stats["cell_size"],
-                                                      cliff_height=result.scales.get("cliff_height_m"))},
+                                                      cliff_height=result.scales.get("cliff_height_m"),
+                                                      flat_top=flat_topped(result.heights, stats["cell_size"]))},
         "field": {"root": "world", "material": "landscape"},
     }
     look = stats.get("fallen_blocks_look")
