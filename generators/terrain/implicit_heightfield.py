@@ -313,11 +313,15 @@ class ImplicitHeightfield(Heightfield):
         # f_T >= -c  =>  v >= -c / k (0 <= c < T); nothing to bound when c >= T.
         # Below the surface (c < 0, asked by the sum's caps) s(v) >= -c > 0 only
         # gives v >= -c / S_SIGMA.
-        shifts = [c * dr.select(mi.Bool(c >= 0.0), self._inv_k, self._inv_S) for c in levels]
+        # Levels known to lie at or above T (the sum's shift by a set's maximum: every
+        # point is within them) are answered 0 without their bounds.
+        whole = [isinstance(c, (int, float)) and c >= self.T_np * (1.0 + 1e-6) for c in levels]
+        asked = [c for c, skip in zip(levels, whole) if not skip]
+        shifts = [c * dr.select(mi.Bool(c >= 0.0), self._inv_k, self._inv_S) for c in asked]
         terms = None
-        if direction is not None and (levels or radii):
+        if direction is not None and (asked or radii):
             terms = self._line.derivative_terms(p, direction, k, a0, level, footprint)
-        if direction is not None and levels:
+        if direction is not None and asked:
             # Along the ray: second-order bounds of v on the ray's own line; ahead only
             # where the tracer allows it (arches_render.field.node, "Ahead").
             lines = self._line.free_lengths(p, direction, v, k, shifts, a0, level, footprint, terms)
@@ -326,7 +330,7 @@ class ImplicitHeightfield(Heightfield):
                 ahead = self._line.ahead_lengths(v, shifts, terms)
                 lines = [dr.select(lanes, dr.maximum(a, d), d) for a, d in zip(ahead, lines)]
         ds = []
-        for i, (c, shift) in enumerate(zip(levels, shifts)):
+        for i, (c, shift) in enumerate(zip(asked, shifts)):
             dT = dr.maximum(-v - shift, 0.0) * self._inv_Lh * (1.0 / grow)
             if direction is not None:
                 dT = dr.maximum(dT, lines[i])
@@ -335,6 +339,8 @@ class ImplicitHeightfield(Heightfield):
             rc = self._R * dr.sqrt(dr.maximum(1.0 - dr.cbrt(wc), 0.0))
             d = dr.maximum(dT, dr.maximum(dP - rc, 0.0))
             ds.append(dr.select(c >= self._T, 0.0, d))
+        found = iter(ds)
+        ds = [mi.Float(0.0) if skip else next(found) for skip in whole]
         return f, tuple(ds), self.local_slopes(v, dP, k, radii, grow, terms)
 
     def bounds(self):

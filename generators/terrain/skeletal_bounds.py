@@ -95,7 +95,8 @@ from .falloff import G_SLOPE, falloff_slope_max
 #: Distance bound of an empty level set (finite, so that ``0 * FAR`` stays 0).
 FAR = 1e10
 
-__all__ = ["level_bound", "slanted_bound", "core_bound", "local_slope", "footprint_error", "quiet_within"]
+__all__ = ["level_bound", "slanted_bound", "core_bound", "local_slope", "footprint_error", "quiet_within",
+           "below_all"]
 
 
 def level_bound(node, prim, geometry, u, rate=None):
@@ -190,3 +191,12 @@ def quiet_within(node, p, reach):
     cell, stored, _, inside = node._cell(p)
     quiet = inside & (dr.gather(mi.Float, node._cell_L, cell, stored) == 0.0) & (reach <= node.cell)
     return quiet | (~inside & (box_distance(p, node._glo_box[0], node._glo_box[1]) > reach))
+
+
+def below_all(threshold, c) -> bool:
+    """Whether the level ``{f >= -c}`` of a set that adds matter holds every point, known
+    before tracing: ``c`` a number with ``u = threshold - c < 0`` (a sum asks its sets at
+    its other operands' maximum, far below). The set's final selects keep Hart's bound
+    alone for such a level, so the loop over the primitives need not compute its
+    geometric bounds (renders are bitwise the same)."""
+    return isinstance(c, (int, float)) and threshold - c < -1e-6 * max(1.0, abs(c))

@@ -90,7 +90,8 @@ from arches_render.field.brick_grid import BrickLayout, list_entry
 from arches_render.field.primitive_set import empty_distance, grid_lists, unlisted_gaps
 
 from .falloff import G_SLOPE, g_dr
-from .skeletal_bounds import FAR, core_bound, footprint_error, level_bound, local_slope, quiet_within, slanted_bound
+from .skeletal_bounds import (FAR, below_all, core_bound, footprint_error, level_bound, local_slope, quiet_within,
+                              slanted_bound)
 from .skeletal_params import noise_params, primitive_arrays
 from .skeletal_records import RECORD, gather_primitive, pack_records
 
@@ -549,9 +550,14 @@ class SkeletalSet(Node):
         slopes, geo = (), []
         if us or radii or slants:
             # Caps need the near lists (a superset of the slope lists); cores need
-            # only the primitives whose support holds p.
+            # only the primitives whose support holds p. Levels below every value keep
+            # Hart's bound (below): no geometric bounds per primitive (:func:`below_all`).
             lists = self._near if self._near is not None else self._slope_lists
-            F, geo, slopes = self._accumulate(p, lists, us, footprint, radii, slants, direction)
+            kept = [carving or not below_all(self.threshold_np, c) for c in levels] if us else []
+            F, found, slopes = self._accumulate(p, lists, [u for u, k in zip(us, kept) if k], footprint, radii,
+                                                slants, direction)
+            found = iter(found)
+            geo = [next(found) if k else mi.Float(0.0) for k in kept] + list(found)
             f = F - self._threshold
         elif footprint is not None:
             f = self._accumulate(p, self._lists, (), footprint)[0] - self._threshold
