@@ -298,6 +298,14 @@ def one_sided_lanes():
     return _ONE_SIDED
 
 
+def refill(answers, skipped, fill=0.0):
+    """``answers`` (one per level not ``skipped``, in order, then any extra items) with
+    ``mi.Float(fill)`` put back at the ``skipped`` levels: for nodes that answer levels
+    known before tracing without bounding them (a level holding every point)."""
+    found = iter(answers)
+    return [mi.Float(fill) if skip else next(found) for skip in skipped] + list(found)
+
+
 def hart_bounds(f, levels, lipschitz):
     """Hart's bounds ``max(-f - c, 0) / L`` for each level ``c``."""
     inv = 1.0 / lipschitz

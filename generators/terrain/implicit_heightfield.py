@@ -97,7 +97,8 @@ from arches_render.backend import variant
 from arches_render.field import Heightfield
 from arches_render.field.heightfield import height_grid, line_factors, window_reach
 from arches_render.field.lod import OctaveLOD
-from arches_render.field.node import box_distance, box_gap, box_reach, clip_index, one_sided_lanes, opaque_float
+from arches_render.field.node import (box_distance, box_gap, box_reach, clip_index, one_sided_lanes, opaque_float,
+                                      refill)
 from arches_render.field.noise import fbm, fbm_gradient, fbm_lipschitz, fbm_range
 from arches_render.field.window_filters import window_max
 
@@ -339,9 +340,7 @@ class ImplicitHeightfield(Heightfield):
             rc = self._R * dr.sqrt(dr.maximum(1.0 - dr.cbrt(wc), 0.0))
             d = dr.maximum(dT, dr.maximum(dP - rc, 0.0))
             ds.append(dr.select(c >= self._T, 0.0, d))
-        found = iter(ds)
-        ds = [mi.Float(0.0) if skip else next(found) for skip in whole]
-        return f, tuple(ds), self.local_slopes(v, dP, k, radii, grow, terms)
+        return f, tuple(refill(ds, whole)), self.local_slopes(v, dP, k, radii, grow, terms)
 
     def bounds(self):
         r0 = R0_FACTOR * self.R_np

@@ -83,7 +83,7 @@ import mitsuba as mi
 import numpy as np
 
 from arches_render.field.lod import OctaveLOD
-from arches_render.field.node import Node, box_distance, opaque_float
+from arches_render.field.node import Node, box_distance, opaque_float, refill
 from arches_render.field.noise import fbm, fbm_lipschitz
 from arches_render.field.window_filters import window_max
 from arches_render.field.brick_grid import BrickLayout, list_entry
@@ -553,11 +553,10 @@ class SkeletalSet(Node):
             # only the primitives whose support holds p. Levels below every value keep
             # Hart's bound (below): no geometric bounds per primitive (:func:`below_all`).
             lists = self._near if self._near is not None else self._slope_lists
-            kept = [carving or not below_all(self.threshold_np, c) for c in levels] if us else []
-            F, found, slopes = self._accumulate(p, lists, [u for u, k in zip(us, kept) if k], footprint, radii,
-                                                slants, direction)
-            found = iter(found)
-            geo = [next(found) if k else mi.Float(0.0) for k in kept] + list(found)
+            skipped = [not carving and below_all(self.threshold_np, c) for c in levels] if us else []
+            F, found, slopes = self._accumulate(p, lists, [u for u, s in zip(us, skipped) if not s], footprint,
+                                                radii, slants, direction)
+            geo = refill(found, skipped)
             f = F - self._threshold
         elif footprint is not None:
             f = self._accumulate(p, self._lists, (), footprint)[0] - self._threshold
