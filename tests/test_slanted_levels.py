@@ -141,3 +141,59 @@ def test_bounds_in_the_air_among_pillars_reach_past_the_near_lists():
     # at the reach, none.
     reach = NEAR_REACH * PILLARS.cell
     assert np.mean(d > 1.01 * reach) > 0.4 and np.mean(d > 1.5 * reach) > 0.1
+
+
+def _walls_with_frames(n=2000, seed=6):
+    """Points near the pillars' noisy walls (``-f`` in (0, 8), inside a support), with
+    the unit vector ``u`` from their pillar's skeleton and a horizontal tangent ``w``
+    (the pillars stand upright: ``w`` grazes the wall)."""
+    rng = np.random.default_rng(seed)
+    k = rng.integers(0, PILLARS.n, 40 * n)
+    a, b = PILLARS.a_np[k], PILLARS.b_np[k]
+    s = a + (b - a) * rng.uniform(0.05, 0.95, (len(k), 1))
+    ang = rng.uniform(0, 2 * np.pi, len(k))
+    u = np.column_stack([np.cos(ang), np.sin(ang), np.zeros(len(k))])
+    w = np.column_stack([-np.sin(ang), np.cos(ang), np.zeros(len(k))])
+    R, c = PILLARS.radius_np[k], PILLARS.core_np[k]
+    p = s + u * (c + R * rng.uniform(0.3, 1.3, len(k)))[:, None]
+    f = evaluate(SCULPTED, p)
+    keep = np.flatnonzero((f < 0) & (f > -8) & (evaluate(PILLARS, p) > 0))[:n]
+    assert len(keep) == n
+    return p[keep], u[keep], w[keep]
+
+
+def _line_bounds(p, w, ahead=False):
+    from arches_render.field.node import one_sided
+    dv = mi.Vector3f(*(mi.Float(w[:, i].astype(np.float32)) for i in range(3)))
+    with one_sided(mi.Bool(True) if ahead else None):
+        f, (d,) = SCULPTED.eval_bounds(_points(p), (0.0,), dv)
+    dr.eval(f, d)
+    return d.numpy().astype(np.float64)
+
+
+@pytest.mark.parametrize("ray", ["grazing", "tilted", "leaving ahead"])
+def test_line_bounds_past_noisy_walls_are_free_and_longer_than_balls(ray):
+    """Level bounds along a ray's line (skeletal_bounds, "Along a line": ``rho`` falls no
+    faster than ``|grad r . u|`` on the line, ``max(-grad r . u, 0)`` ahead only): a ray
+    grazing a pillar's noisy wall, one tilted off it, and one leaving it outward,
+    traced ahead only, as a tracer's first step from a surface. Dense samples of each
+    segment declared free hold no matter, and the lengths beat the free balls."""
+    p, u, w = _walls_with_frames()
+    ahead = ray == "leaving ahead"
+    if ray == "tilted":
+        w = w + 0.5 * u + np.array([0.0, 0.0, 0.3])
+        w /= np.linalg.norm(w, axis=1, keepdims=True)
+    elif ahead:
+        w = u
+    d = _line_bounds(p, w, ahead)
+    _, ball = _bounds(p)
+    t = np.linspace(0.0 if ahead else -1.0, 1.0, 97) * 0.999
+    q = p[:, None, :] + w[:, None, :] * (np.minimum(d, 1e3)[:, None] * t)[..., None]
+    worst = float(evaluate(SCULPTED, q.reshape(-1, 3)).max())
+    assert worst < 1e-4, f"f = {worst:.3g} on a segment declared free"
+    # Not vacuous: measured medians of d / ball 1.50 grazing, 1.25 tilted, 1.54 leaving
+    # (1.03 grazing with the balls alone, the terrain's lines aside). Not every point
+    # gains: the slanted bound's second pass sits at a lower level when its first is
+    # longer (skeletal_bounds.slanted_bound).
+    ratio = d / np.maximum(ball, 1e-9)
+    assert np.median(ratio) > (1.12 if ray == "tilted" else 1.3)

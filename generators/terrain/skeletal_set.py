@@ -381,7 +381,7 @@ class SkeletalSet(Node):
         ``p`` (a value in [0, 1]); with ``geometry``, ``(g, rho, r, D)``: also
         ``rho = max(r - c, 0)``, the distance ``r`` to the skeleton and the star radius
         ``D(p)`` (``D_max`` where the noise is skipped), and with a ``direction`` ``u``
-        (noise-free sets) ``|grad r . u|`` after them. ``level``: the star noise's
+        the lean ``grad r . u`` (signed) after them. ``level``: the star noise's
         footprint level (``None``: every octave)."""
         a, ba, R, core = prim.a, prim.ba, prim.R, prim.core
         pa = p - a
@@ -390,13 +390,10 @@ class SkeletalSet(Node):
         off = p - s
         r = dr.norm(off)
         rho = dr.maximum(r - core, 0.0)
+        lean = () if direction is None else (dr.dot(off, direction) * dr.rcp(dr.maximum(r, 1e-30)),)
         if not self.noise:
             g = g_dr(dr.square(rho / R))
-            if not geometry:
-                return g
-            if direction is None:
-                return g, rho, r, R
-            return g, rho, r, R, dr.abs(dr.dot(off, direction)) * dr.rcp(dr.maximum(r, 1e-30))
+            return (g, rho, r, R, *lean) if geometry else g
 
         def noisy(rho, R, core, s, off, r, group, *lvl):
             u = off / dr.maximum(r, 1e-12)
@@ -412,7 +409,7 @@ class SkeletalSet(Node):
         lvl = () if level is None else (level,)
         g, D = dr.if_stmt((rho, R, core, s, off, r, prim.group, *lvl), rho < R * self._reach, noisy, far,
                           label="star_noise")
-        return (g, rho, r, D) if geometry else g
+        return (g, rho, r, D, *lean) if geometry else g
 
     def field(self, p):
         """Combined field ``F(p)`` (before the threshold) as ``mi.Float``."""
@@ -427,19 +424,21 @@ class SkeletalSet(Node):
         bound of :func:`.skeletal_bounds.local_slope` summed over the listed primitives (one member
         per curve: their maximum); for each ``(u0, slope, cap)`` of ``slants``, the smallest
         :func:`.skeletal_bounds.slanted_bound` (after the levels' bounds in ``ds``).
-        With a ray's ``direction``, slopes along its line where the set has no noise.
+        With a ray's ``direction``, level bounds and (sets without noise) slopes along its line.
         Primitives listed but not touching ``p`` add exactly 0, so the near lists give
         the same ``F`` as the cell lists. With a ``footprint``, the footprint field
         (star noise truncated)."""
         level = self._lod.level(footprint) if self.noise else None
         rate = footprint.rate if level is not None else None
-        # Slopes along the ray's line (skeletal_bounds, "Along a line"): noise-free sets.
-        along = direction if radii and direction is not None and not self.noise else None
+        carving = self.value_max <= 0
+        n_u = len(us) + len(slants)
+        # Bounds along the ray's line (skeletal_bounds, "Along a line"): the level bounds
+        # of sets that add matter, the slopes of sets without noise.
+        along = direction if direction is not None and ((n_u and not carving) or (radii and not self.noise)) else None
         offset_a, index_a = lists
         cell, stored, _, inside = self._cell(p)
         start = dr.gather(mi.UInt32, offset_a, cell, stored)
         count = dr.select(inside, dr.gather(mi.UInt32, offset_a, cell + 1, stored) - start, 0)
-        n_u = len(us) + len(slants)
 
         def visit(prim, ds):
             """``(e, g, ds, slopes)`` of the primitive ``prim``."""
@@ -459,7 +458,6 @@ class SkeletalSet(Node):
             slopes = tuple(local_slope(self, prim, geometry, rad, rate) for rad in radii)
             return e, geometry[0], tuple(out), slopes
 
-        carving = self.value_max <= 0
         far = tuple(mi.Float(0.0 if carving else FAR) for _ in us) + tuple(mi.Float(FAR) for _ in slants)
         zeros = tuple(mi.Float(0.0) for _ in radii)
         if self.combine == "max" or not self.grouped:
