@@ -109,22 +109,32 @@ from .falloff import G_SLOPE, falloff_slope_max
 #: Distance bound of an empty level set (finite, so that ``0 * FAR`` stays 0).
 FAR = 1e10
 
-__all__ = ["level_bound", "slanted_bound", "core_bound", "local_slope", "footprint_error", "quiet_within",
+__all__ = ["level_shape", "level_bound", "slant_cap", "slanted_bound", "core_bound", "local_slope", "footprint_error", "quiet_within",
            "below_all"]
 
 
-def level_bound(node, prim, geometry, u, rate=None):
+def level_shape(node, e, u, skip=False):
+    """``(x, acts)`` of a primitive of energy ``e`` at the level ``u > 0`` (module
+    docstring, "Distance bounds"): ``{F_k >= u}`` is ``{rho <= x D}``, and empty
+    where ``acts`` is false. ``None`` for ``e`` ``None`` (primitives of different
+    energies: each its own, in :func:`level_bound`) or with ``skip``."""
+    if e is None or skip:
+        return None
+    if node.combine == "max":
+        x = dr.sqrt(dr.maximum(1.0 - dr.cbrt(dr.minimum(u / dr.maximum(e, 1e-30), 1.0)), 0.0))
+        return x, e >= u
+    return 1.0, e > 0.0
+
+
+def level_bound(node, prim, geometry, u, rate=None, shape=None):
     """Lower bound of the distance from ``p`` to ``{F_k >= u}`` (``u > 0``), or
     ``None`` where primitive ``k`` cannot reach ``u`` (module docstring, "Distance
     bounds"): returns ``(acts, bound)``; along the ray's line where ``geometry``
-    holds its lean ("Along a line"), else in a ball."""
+    holds its lean ("Along a line"), else in a ball. ``shape``: the level's
+    :func:`level_shape`, computed once outside the loop over the primitives where
+    they share one energy."""
     _, rho, r, D, *lean = geometry
-    e = prim.e
-    if node.combine == "max":
-        x = dr.sqrt(dr.maximum(1.0 - dr.cbrt(dr.minimum(u / dr.maximum(e, 1e-30), 1.0)), 0.0))
-        acts = e >= u
-    else:
-        x, acts = 1.0, e > 0.0
+    x, acts = level_shape(node, prim.e, u) if shape is None else shape
     bound = rho - x * prim.reach_R  # with D_max
     rate_rho = 1.0
     if lean:
@@ -153,7 +163,19 @@ def line_rate(lean):
     return both if lanes is None else dr.select(lanes, dr.maximum(-lean, 0.0), both)
 
 
-def slanted_bound(node, prim, geometry, u0, slope, cap, rate=None):
+#: Where a slanted bound stops: this fraction of the radius ``u0 / slope`` at which the
+#: slanted level reaches 0.
+SLANT_CAP = 0.75
+
+
+def slant_cap(u0, slope, reach):
+    """Largest radius of a slanted bound: ``SLANT_CAP u0 / slope`` (the level stays
+    positive), at most ``reach`` (``None``: no limit)."""
+    cap = dr.maximum(u0, 0.0) * SLANT_CAP * dr.rcp(dr.maximum(slope, 1e-12))
+    return cap if reach is None else dr.minimum(cap, reach)
+
+
+def slanted_bound(node, prim, geometry, u0, slope, cap, rate=None, shape=None):
     """Lower bound of the radius ``delta`` of a ball around ``p`` in which
     ``F_k(q) < u0 - slope delta`` (module docstring, "Slanted levels"), or ``FAR``
     where primitive ``k`` reaches no level of the ball. ``u0 > 0``, ``slope > 0`` and
@@ -165,7 +187,7 @@ def slanted_bound(node, prim, geometry, u0, slope, cap, rate=None):
     by the goblins-like pillars of ``tests/test_slanted_levels.py``), yet over the
     goblins' rays the line's took 5-7 % fewer steps; keeping the better of both cost
     a third pass per primitive and more time than it saved."""
-    acts, first = level_bound(node, prim, geometry, u0, rate)
+    acts, first = level_bound(node, prim, geometry, u0, rate, shape)
     a = dr.select(acts, dr.clip(first, 0.0, cap), cap)
     acts, second = level_bound(node, prim, geometry, u0 - slope * a, rate)
     return dr.select(acts, second, FAR)

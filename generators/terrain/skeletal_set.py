@@ -90,8 +90,8 @@ from arches_render.field.brick_grid import BrickLayout, list_entry
 from arches_render.field.primitive_set import empty_distance, grid_lists, unlisted_gaps
 
 from .falloff import G_SLOPE, g_dr
-from .skeletal_bounds import (FAR, below_all, core_bound, footprint_error, level_bound, local_slope, quiet_within,
-                              slanted_bound)
+from .skeletal_bounds import (FAR, below_all, core_bound, footprint_error, level_bound, level_shape, local_slope,
+                              quiet_within, slant_cap, slanted_bound)
 from .skeletal_params import noise_params, primitive_arrays
 from .skeletal_records import RECORD, gather_primitive, pack_records
 
@@ -241,6 +241,10 @@ class SkeletalSet(Node):
         self._glo_box = ([opaque_float(v) for v in self.grid_lo],
                          [opaque_float(v) for v in self.grid_lo + cell * res])
         self._threshold = opaque_float(self.threshold_np)
+        # Opaque, as the records' energies are: a literal would fold u / e into
+        # u * (1 / e) and move the bounds by an ulp.
+        uniform = self.n and np.all(e == e[0])
+        self._shared_energy = opaque_float(float(e[0])) if uniform else None
         if self.noise:
             nz = self.noise
             self._amp = opaque_float(nz["amplitude"])
@@ -439,6 +443,10 @@ class SkeletalSet(Node):
         cell, stored, _, inside = self._cell(p)
         start = dr.gather(mi.UInt32, offset_a, cell, stored)
         count = dr.select(inside, dr.gather(mi.UInt32, offset_a, cell + 1, stored) - start, 0)
+        # One energy for every primitive (the hoodoos preset): each level's shape is
+        # per lane, not per primitive, and leaves the loop.
+        shapes = [level_shape(self, self._shared_energy, u, carving) for u in us]
+        slant_shapes = [level_shape(self, self._shared_energy, u0) for u0, _, _ in slants]
 
         def visit(prim, ds):
             """``(e, g, ds, slopes)`` of the primitive ``prim``."""
@@ -447,14 +455,14 @@ class SkeletalSet(Node):
                 return e, self._falloff(p, prim, level=level), ds, ()
             geometry = self._falloff(p, prim, True, level, along)
             out = []
-            for u, d in zip(us, ds):
+            for u, d, shape in zip(us, ds, shapes):
                 if carving:
                     out.append(dr.maximum(d, core_bound(self, prim, geometry, u)))
                     continue
-                acts, bound = level_bound(self, prim, geometry, u, rate)
+                acts, bound = level_bound(self, prim, geometry, u, rate, shape)
                 out.append(dr.select(acts, dr.minimum(d, bound), d))
-            for (u0, slope, cap), d in zip(slants, ds[len(us):]):
-                out.append(dr.minimum(d, slanted_bound(self, prim, geometry, u0, slope, cap, rate)))
+            for (u0, slope, cap), d, shape in zip(slants, ds[len(us):], slant_shapes):
+                out.append(dr.minimum(d, slanted_bound(self, prim, geometry, u0, slope, cap, rate, shape)))
             slopes = tuple(local_slope(self, prim, geometry, rad, rate) for rad in radii)
             return e, geometry[0], tuple(out), slopes
 
@@ -513,16 +521,6 @@ class SkeletalSet(Node):
     #: :meth:`eval_local` answers slanted levels (:mod:`.skeletal_bounds`).
     slanted_levels = True
 
-    #: Where a slanted bound stops: this fraction of the radius ``u0 / slope`` at which
-    #: the slanted level reaches 0.
-    SLANT_CAP = 0.75
-
-    def _slant_cap(self, u0, slope, reach):
-        """Largest radius of a slanted bound: ``SLANT_CAP u0 / slope`` (the level stays
-        positive), at most ``reach``."""
-        cap = dr.maximum(u0, 0.0) * self.SLANT_CAP * dr.rcp(dr.maximum(slope, 1e-12))
-        return cap if reach is None else dr.minimum(cap, reach)
-
     def eval_local(self, p, levels, direction=None, footprint=None, radii=(), slants=()):
         """``(f, ds, slopes)``: :meth:`eval_bounds` and, for each radius of ``radii``, a
         bound of ``|grad f|`` in the ball of that radius around ``p`` (module
@@ -543,7 +541,7 @@ class SkeletalSet(Node):
         us = [self._threshold - c for c in levels] if self._near is not None or carving else []
         if slants and self._near is None:
             raise ValueError("slanted levels need a set that adds matter")
-        slants = [(self._threshold - c, slope, self._slant_cap(self._threshold - c, slope, reach))
+        slants = [(self._threshold - c, slope, slant_cap(self._threshold - c, slope, reach))
                   for c, slope, reach in slants]
         slopes, geo = (), []
         if us or radii or slants:
