@@ -10,6 +10,7 @@ wall of the field's prism, a camera in rock).
 from __future__ import annotations
 
 import math
+import tomllib
 
 import numpy as np
 import pytest
@@ -368,6 +369,13 @@ def test_caldera_gets_cliffs_in_its_walls_and_a_lake_on_its_floor(tmp_path, caps
     water = trimesh.load(next(tmp_path.glob("caldera*.water.ply")), process=False)
     assert water.vertices[:, 2].max() < H[(r > 1300) & (r < 1500)].min() - 200.0
     desc = load_scene(out)
+    # The far field reads no node of the tile's fallen blocks: their bare-rock masks read
+    # bare rock all over it (the tile's edge showed as a ring of banded relief).
+    doc = tomllib.loads(out.read_text())
+    tile, far = doc["materials"]["landscape"], doc["materials"][doc["far_field"][0]["material"]]
+    assert "masks" in tile and "node" in tile["cavity"]
+    assert "masks" not in far and "cavity" not in far and "blocks" not in far["strata"]
+    assert far["overrides"] == tile["overrides"] and far["strata"]["levels"] == tile["strata"]["levels"]
     # Cameras below the walls do not look up at them past PITCH half fields, so the floor
     # stays in the frame (the first looked up 33 degrees, over two half fields, before);
     # 1e-6 rad: the camera's numbers as the TOML writes and reads them.

@@ -20,7 +20,8 @@ Sun
     grazing enough to model overhangs with shadow, bright enough to see into caves.
 Ground and water
     The far field (``[[far_field]]``, :mod:`.far_field`) continues the terrain to
-    the horizon in the same material, and the sea with it where the sea reaches
+    the horizon in the same material (without the terms that read the tile's fallen
+    blocks: :func:`far_material`), and the sea with it where the sea reaches
     the tile's border; the water surfaces of the tile (:mod:`.water`) are a mesh.
     Tiles of a kilometre or more get an ``[atmosphere]``: distance reads as haze,
     thinned on tiles wider than a third of :data:`HAZE_RANGE_M` so that the air's
@@ -36,6 +37,7 @@ Material
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 import re
@@ -454,6 +456,19 @@ def landscape_material(zlo, zhi, sea_level=None, geology=None, box=None, preset=
     return mat
 
 
+def far_material(material):
+    """The far field's material: ``material`` (the tile's, before the fallen blocks' terms)
+    without its occlusion. The blocks' bare-rock masks and occlusion read nodes of the
+    tile (its talus, its eroded strata) that the far field's continued relief does not
+    follow: there the masks read bare rock everywhere, and the eroded mesas' overview
+    showed a green tile ringed by banded far relief to the horizon, the tile's edge
+    plain to see (a caldera's distant flanks: strata bands aliased to moire). Occlusion
+    from the tile's field means nothing on the far field's mesh."""
+    far = copy.deepcopy(material)
+    far.pop("cavity", None)
+    return far
+
+
 def _geology(result):
     """The built geology node of ``result`` (the material's strata read it) and the rock's volume."""
     from arches_render.scene.nodes import NodeBuilder
@@ -530,15 +545,17 @@ def scene_document(result, name, work_dir, progress=None, close=3):
                                                       flat_top=flat_topped(result.heights, stats["cell_size"]))},
         "field": {"root": "world", "material": "landscape"},
     }
+    far = {"node": "terrain", "material": "landscape"}
     look = stats.get("fallen_blocks_look")
     if look:  # fallen blocks: bare rock, and the occlusion of the ground they lie on (.talus)
         mat = doc["materials"]["landscape"]
+        doc["materials"]["landscape_far"] = far_material(mat)
+        far["material"] = "landscape_far"
         mat["masks"] = look["masks"]
         if "cavity" in mat:
             mat["cavity"]["node"] = look["cavity_node"]
         if "strata" in mat and "strata_blocks" in look:  # the blocks carry their cliff's beds
             mat["strata"]["blocks"] = look["strata_blocks"]
-    far = {"node": "terrain", "material": "landscape"}
     if water is not None and water.wet:
         doc["materials"]["water"] = {"type": "diffuse", "color": [0.03, 0.09, 0.12]}
         if result.water_file:
