@@ -559,3 +559,32 @@ def test_rock_texture_of_sea_cliffs_grows_with_them():
     assert tile(23.4) == 6.0 and tile(608.0) == 30.0
     assert tile(None) is None and tile(0.0) is None
     assert all(tile(98.0, p) is None for p in ("river", "karst", "hoodoos", "strata"))
+
+
+def test_scree_covers_gentle_ground_above_the_grass_in_the_rocks_mean_colour():
+    """Above the grass, gentle ground is scree of the rock's own beds mixed (the sand layer
+    to the snow line, in the strata palette's mean colour): a volcano's bare upper flanks
+    showed its horizontal beds as a bullseye of rings. Flat-topped relief (grass to the
+    top) and high mountains (snow from the grass line up) have no bare band to cover."""
+    variant()
+    from arches_render.generators.terrain import geology as G
+    from arches_render.generators.terrain.scene_writer import landscape_material
+    from arches_render.materials.masks import PALETTES
+    from arches_render.materials.presets import preset_layers
+    rock = G.Blend(G.Strata(20.0, 5.0, 0.6), G.Turbulence(60.0, 0.2))
+
+    def look(zlo, zhi, sea=None, **kw):
+        box = (np.array([0.0, 0.0, zlo]), np.array([3000.0, 3000.0, zhi]))
+        return landscape_material(zlo, zhi, sea, rock, box, preset="strata", **kw)["overrides"]
+
+    cone, snowy = look(1200.0, 1500.0), look(-100.0, 1200.0, 0.0)
+    mean = np.mean(PALETTES["sandstone"], axis=0)
+    for over in (cone, snowy):
+        assert over["sand.height_max"] == over["snow.height_min"] > over["grass.height_max"]
+        assert np.allclose(over["sand.tint"], mean, atol=1e-4)
+    assert cone["snow.height_min"] > 1500.0 and snowy["snow.height_min"] == 1200.0 - 0.05 * 1200.0
+    for over in (look(1198.0, 1529.0, flat_top=True), look(502.0, 4216.0)):
+        assert "sand.tint" not in over and over["sand.height_max"] < over["grass.height_max"]
+    # Gentle ground only: the beds still show where the rock stands steep.
+    layers = {layer.name: layer for layer in preset_layers("terrain", cone)[0]}
+    assert layers["sand"].slope_max + layers["sand"].slope_soft <= 30.0

@@ -45,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
-from arches_render.materials.masks import terrain_look
+from arches_render.materials.masks import PALETTES, terrain_look
 
 from .continued_relief import ContinuedRelief
 from .presets import PRESETS
@@ -426,7 +426,10 @@ def landscape_material(zlo, zhi, sea_level=None, geology=None, box=None, preset=
     built resistance node of the scene's ``[nodes.geology]``) and ``box`` (the rock's
     volume), the rock takes the strata colours of the preset's palette
     (:data:`STRATA_PALETTE`), the cavity term (reach two cells) and, with
-    ``sea_level``, a wet band. With ``cliff_height`` (m) and the ``sea`` preset the
+    ``sea_level``, a wet band; above the grass (not on high mountains), gentle ground
+    is scree in the palette's mean colour (the sand layer, which keeps to slopes under
+    18-26 degrees, up to the snow line; low flats take that colour too: sand is the
+    local rock weathered). With ``cliff_height`` (m) and the ``sea`` preset the
     rock texture's tile is :data:`ROCK_TILE_PER_CLIFF` of it, within
     :data:`ROCK_TILE_RANGE`.
     """
@@ -453,6 +456,13 @@ def landscape_material(zlo, zhi, sea_level=None, geology=None, box=None, preset=
         palette = "limestone" if alpine else STRATA_PALETTE.get(preset, "sandstone")
         mat.update(terrain_look(geology, box, palette, "geology", sea_level,
                                 cavity_radius=2.0 * cell))
+        if not alpine and grass_top < zhi:
+            # Scree: gentle ground above the grass is covered by the rock's own debris,
+            # its beds mixed (the sand layer, gentle slopes only, in the palette's mean
+            # colour): bare, a volcano's upper flanks showed its horizontal beds as a
+            # bullseye of rings; beds show where the rock stands steep.
+            over["sand.height_max"] = over["snow.height_min"]
+            over["sand.tint"] = [round(float(c), 4) for c in np.mean(PALETTES[palette], axis=0)]
     return mat
 
 
