@@ -197,3 +197,39 @@ def test_line_bounds_past_noisy_walls_are_free_and_longer_than_balls(ray):
     # longer (skeletal_bounds.slanted_bound).
     ratio = d / np.maximum(ball, 1e-9)
     assert np.median(ratio) > (1.12 if ray == "tilted" else 1.3)
+
+
+def test_line_bounds_by_a_rough_star_noise_are_free():
+    """Where the star noise is rough (amplitude 0.3 of R, wavelength under R) the line
+    bound near the surface is held by how fast the noise can swell along the line
+    (skeletal_bounds, "Along a line": ``r`` stays above ``r (1 - |lean| / 2)``); grazing and
+    tilted segments declared free, sampled densely, hold no matter."""
+    from arches_render.generators.terrain.skeletal_set import SkeletalSet
+    from arches_render.field.node import one_sided
+    rng = np.random.default_rng(17)
+    a = np.column_stack([rng.uniform(0, 60, 12), rng.uniform(0, 60, 12), np.zeros(12)])
+    # Points as skeletons: the noise's swell is all the boundary point's turn, (c + R) / r.
+    rough = SkeletalSet(a, None, 4.0, 2.0, core=1.0, combine="max", threshold=1.0,
+                        noise=dict(amplitude=0.3, wavelength=1.5, octaves=2, seed=5))
+    k = rng.integers(0, 12, 200000)
+    ang = rng.uniform(0, 2 * np.pi, len(k))
+    u = np.column_stack([np.cos(ang), np.sin(ang), np.zeros(len(k))])
+    p = a[k] + u * rng.uniform(1.5, 6.5, (len(k), 1))
+    f = evaluate(rough, p)
+    keep = np.flatnonzero((f < 0.0) & (f > -0.3))[:8000]
+    p, u = p[keep], u[keep]
+    w = np.column_stack([-u[:, 1], u[:, 0], np.zeros(len(u))])
+    worst = -np.inf
+    for tilt in (0.0, 0.4, 0.8):
+        d = w + tilt * u
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        dv = mi.Vector3f(*(mi.Float(d[:, i].astype(np.float32)) for i in range(3)))
+        for ahead in (False, True):
+            with one_sided(mi.Bool(True) if ahead else None):
+                _, (b,) = rough.eval_bounds(_points(p), (0.0,), dv)
+            dr.eval(b)
+            b = np.minimum(b.numpy().astype(np.float64), 1e3)
+            t = np.linspace(0.0 if ahead else -1.0, 1.0, 129) * 0.999
+            q = p[:, None, :] + d[:, None, :] * (b[:, None] * t)[..., None]
+            worst = max(worst, float(evaluate(rough, q.reshape(-1, 3)).max()))
+    assert worst < 1e-4, f"f = {worst:.3g} on a segment declared free"

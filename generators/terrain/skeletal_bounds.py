@@ -64,7 +64,10 @@ of 1 the two distance bounds above become
     d_i >= (rho(p) - x D_max) / a,    d_i >= min(r / 2, (rho(p) - x D(p)) / (a + x L_D)),
 
 so a ray grazing a hoodoo (``a`` near 0) steps by how fast its noise can swell
-(``L_D``), not by how fast it could walk into the wall.
+(``L_D``), not by how fast it could walk into the wall. On the line within ``r / 2`` of
+``p``, ``r`` too stays above its tangent, ``r(q) >= r (1 - |lean| / 2)``, so the noise's
+swell ``L_D`` takes ``(c + R) / (r (1 - |lean| / 2))`` in place of the ball's ``2 (c + R) / r``
+(goblins: camera 38.1 -> 37.5, shadow 36.1 -> 35.3, bounce 32.6 -> 31.7 steps).
 
 Slanted levels (a set summed with a smooth operand, :class:`.operators.Sum`). Where
 a terrain ``f_T`` has a small slope bound ``L_T`` and the set adds steep matter on it
@@ -144,7 +147,10 @@ def level_bound(node, prim, geometry, u, rate=None, shape=None):
     if node.noise:
         # With the noise at p: within r/2 of p, |grad D| <= K (sigma_s + 2 (c + R) / r)
         # (+ K kappa s for a footprint's fade, module docstring).
-        spin = prim.seg + 2.0 * (prim.core + prim.R) * dr.rcp(dr.maximum(r, 1e-12))
+        # Along the line, r stays above r (1 - |lean| / 2) within r / 2 (convexity), so
+        # 1 / (1 - |lean| / 2) replaces the ball's 2 ("Along a line").
+        shrink = 2.0 if not lean else dr.rcp(1.0 - 0.5 * dr.minimum(dr.abs(lean[0]), 1.0))
+        spin = prim.seg + shrink * (prim.core + prim.R) * dr.rcp(dr.maximum(r, 1e-12))
         if rate is not None:
             spin = spin + node._lod.kappa * rate
         lip_D = prim.noise_K * spin
