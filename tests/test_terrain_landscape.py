@@ -315,6 +315,47 @@ def test_legibility_rejects_a_slope_that_fills_the_frame_and_keeps_a_landscape()
     assert out["background"][2] < LEGIBLE["background"], {k: v[2] for k, v in out.items()}
 
 
+def test_legibility_judges_the_landforms_contrast_against_its_surroundings():
+    """The landform's contrast (``shots.legibility``): on the receding-ground view of the
+    test above, a block standing before the ground stands off it (its outline breaks in
+    depth all round: contrast 1, legible); the same rays with the landform a patch of the
+    ground itself (its distances run on across the outline, and so do the normals) have
+    none and are not legible, though sky, background and sheets are the same; turned 60
+    degrees from the ground (a crease all round) it has contrast 1; a frame the landform
+    fills, or one without it, has 0."""
+    from arches_render.generators.terrain.shots import LEGIBLE, legibility
+    h, w = 18, 32
+    v = np.linspace(0.4, -0.4, h)[:, None] * np.ones((1, w))
+    u = np.ones((h, 1)) * np.linspace(-0.5, 0.5, w)[None]
+    D = np.stack([np.ones((h, w)), u, v], axis=-1)
+    D /= np.linalg.norm(D, axis=-1, keepdims=True)
+    down = D[..., 2] < -1e-3
+    ground_t = np.where(down, 10.0 / np.maximum(-D[..., 2], 1e-9), np.inf)
+    block = (np.abs(u) < 0.15) & (v > -0.2) & (v < 0.1)
+    view_t = np.where(block, 30.0 / D[..., 0], ground_t)
+    patch = (np.abs(u) < 0.2) & (v < -0.25)
+    t = np.stack([view_t, ground_t, ground_t, ground_t])
+    hit = np.isfinite(t)
+    landform = np.stack([block, patch, np.ones_like(block), np.zeros_like(block)])
+    out = legibility(np.stack([D] * 4), t, hit, landform)
+    assert out["contrast"][0] == 1.0 and out["legible"][0], {k: v[0] for k, v in out.items()}
+    assert out["contrast"][1] < 0.05 and not out["legible"][1], {k: v[1] for k, v in out.items()}
+    for k in (1, 2, 3):
+        assert out["sky"][k] >= LEGIBLE["sky"] and out["one_surface"][k] <= LEGIBLE["one_surface"]
+        assert out["background"][k] >= LEGIBLE["background"], {k_: v[k] for k_, v in out.items()}
+    assert out["contrast"][2] == 0.0 and out["contrast"][3] == 0.0
+    # The same patch turned 60 degrees from the ground (a hollow's wall, lit apart from
+    # it): its outline is a crease, and the view is legible.
+    n = np.zeros((4, h, w, 3))
+    n[..., 2] = 1.0
+    n[1][patch] = [np.sin(np.radians(60)), 0.0, np.cos(np.radians(60))]
+    turned = legibility(np.stack([D] * 4), t, hit, landform, n)
+    assert turned["contrast"][1] == 1.0 and turned["legible"][1], {k: v[1] for k, v in turned.items()}
+    assert turned["contrast"][0] == 1.0 and turned["contrast"][2] == 0.0
+    # Without the landform's rays no contrast is judged (as before).
+    assert legibility(D[None], ground_t[None], hit[1][None])["legible"][0]
+
+
 def _escarpment(n=64):
     """A plateau 900 m above its lowland behind a winding escarpment (200 m cells: coarse)."""
     x = np.linspace(-1, 1, n)
@@ -325,17 +366,19 @@ def _escarpment(n=64):
 
 def _assert_legible_close_shots(out, at_least=3):
     """The header's legibility of every close shot (sky share, background share, one-sheet
-    share) within shots.LEGIBLE, at least ``at_least`` of them, and the overview last."""
+    share, the landform's contrast) within shots.LEGIBLE, at least ``at_least`` of them,
+    and the overview last."""
     import re
     from arches_render.generators.terrain.shots import LEGIBLE
     cams = next(line for line in _header(out) if line.startswith("Cameras: "))
-    found = re.findall(r"legible: sky (\d+) %, background (\d+) %, one sheet (\d+) %", cams)
+    found = re.findall(r"legible: sky (\d+) %, background (\d+) %, one sheet (\d+) %, contrast (\d+) %", cams)
     assert len(found) >= at_least and cams.rstrip().endswith("overview"), cams
-    for sky, background, sheet in found:
+    for sky, background, sheet, contrast in found:
         # (the header rounds to a percent)
         assert float(sky) >= 100 * LEGIBLE["sky"] - 0.5, cams
         assert float(background) >= 100 * LEGIBLE["background"] - 0.5, cams
         assert float(sheet) <= 100 * LEGIBLE["one_surface"] + 0.5, cams
+        assert float(contrast) >= 100 * LEGIBLE["contrast"] - 0.5, cams
 
 
 def test_escarpment_at_coarse_cells_gets_legible_close_shots(tmp_path, capsys):

@@ -174,6 +174,23 @@ def test_accessibility_is_lower_inside_a_cave_than_on_an_open_cliff():
     np.testing.assert_array_equal(alpha, accessibility(mesh, pts, nrm, 20.0, rays=64, seed=1))
 
 
+def test_ray_caster_first_hit_gives_the_distance_and_the_hit_triangles_normal():
+    """``RayCaster.first_hit``: the same distances as ``hit_distance`` (inf on a miss) and
+    the unit normal of the face hit (the cliff's face, its top, the back of its cave)."""
+    from arches_render.generators.terrain.accessibility import RayCaster
+    caster = RayCaster(_cliff_with_cave())
+    O = np.array([[-20.0, 10.0, 5.0], [10.0, 10.0, 60.0], [-20.0, 0.0, 8.0], [-20.0, 0.0, 200.0]])
+    D = np.array([[1.0, 0, 0], [0, 0, -1.0], [1.0, 0, 0], [0, 0, 1.0]])
+    t, n = caster.first_hit(O, D, 100.0)
+    np.testing.assert_allclose(t, caster.hit_distance(O, D, 100.0), rtol=1e-6)
+    np.testing.assert_allclose(t[:3], [20.0, 40.0, 35.0], atol=0.3)
+    assert np.isinf(t[3]) and not n[3].any()
+    np.testing.assert_allclose(np.linalg.norm(n[:3], axis=1), 1.0, rtol=1e-6)
+    # Plane faces exactly; the cave's rounded back as marching cubes facets it.
+    np.testing.assert_allclose(np.abs(n[:2]), [[1, 0, 0], [0, 0, 1]], atol=1e-6)
+    assert abs(n[2, 0]) > 0.95
+
+
 def test_accessibility_of_a_valley_floor_falls_with_its_depth():
     x = np.linspace(-50, 50, 101)
     X, Y = np.meshgrid(x, x)

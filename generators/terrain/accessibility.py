@@ -134,6 +134,17 @@ class RayCaster:
         t = np.asarray(self.scene.run(o, d, dists=dists, query="DISTANCE"), dtype=np.float32)
         return np.where(t < far, t.astype(np.float64), np.inf)
 
+    def first_hit(self, origins, directions, max_distance):
+        """``(t, n)``: :meth:`hit_distance` and the unit normal of the triangle hit
+        (``(N, 3)``, its winding's side; 0 on a miss)."""
+        o = (np.asarray(origins, dtype=np.float64) - self.origin).astype(np.float32)
+        d = np.asarray(directions, dtype=np.float32)
+        out = self.scene.run(o, d, dists=np.full(len(o), np.float32(max_distance), dtype=np.float32), output=1)
+        hit = np.asarray(out["primID"]) >= 0
+        n = np.asarray(out["Ng"], dtype=np.float64)
+        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
+        return np.where(hit, np.asarray(out["tfar"], dtype=np.float64), np.inf), np.where(hit[:, None], n, 0.0)
+
 
 def accessibility(mesh, points, normals, distance, rays=32, offset=None, seed=0, caster=None):
     """Openness ``alpha`` in ``[0, 1]`` of surface points (see module docstring).

@@ -591,7 +591,8 @@ def scene_document(result, name, work_dir, progress=None, close=3):
     lines.append("Cameras: " + "; ".join(
         [f"{n} ({s['height_class']}, {s['height_m']:.0f} m above ground, landform {s['volume_m3']:.3g} m3, covers "
          f"{100 * s['cover']:.0f} % of the frame; legible: sky {100 * s['legible_sky']:.0f} %, background "
-         f"{100 * s['legible_background']:.0f} %, one sheet {100 * s['legible_one_surface']:.0f} %)"
+         f"{100 * s['legible_background']:.0f} %, one sheet {100 * s['legible_one_surface']:.0f} %, contrast "
+         f"{100 * s['legible_contrast']:.0f} %)"
          for n, s in zip(cameras, shots)] + ["overview"]))
     lines += [f"Note: {n}" for n in ([stats["note"]] if "note" in stats else []) + stats.get("notes", [])]
     return doc, lines
