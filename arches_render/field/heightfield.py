@@ -40,6 +40,23 @@ b)`` has slope at most the larger of the two. A difference that subtracts the
 heightfield bounds the distance to its complement with them (a floating island's
 underside: 3.35, the DEM's steepest cell, where the cells around are nearly flat).
 
+Shading normals. The bilinear surface is only C0: its slope jumps
+across every cell edge, so a normal taken from it (and every slope mask of a material:
+grass below 28 degrees, scree, snow) changes abruptly there, and a few metres from the
+camera the DEM's cells showed as squares of scree in the grass (Maunga Whau's
+overview), where the mesh of the same field, shaded with interpolated vertex normals,
+blends smoothly. Normals are therefore taken, inside a :func:`~.node.shading_normals`
+block, from ``h~``, the bilinear elevation averaged over the square of one cell centred
+on the point (a box filter): its gradient is the average of the bilinear gradient over
+that square, continuous everywhere and within the range of the slopes around, so no
+normal leans further than the surface does (a bicubic Catmull-Rom interpolant, tried
+first, overshoots at the gorge's ledges: its normals turned from the camera and the
+default scene's grass showed black streaks). The square is cut by the grid lines into
+at most four pieces on each of which the elevation is bilinear, and a bilinear
+function's mean over a rectangle is its value at the centre: four lookups. ``|h~ - h|``
+is at most an eighth of a cell times the largest change of slope across an edge. Hits,
+bounds and every value outside the block keep the bilinear surface.
+
 References
 ----------
 Paris, A., Galin, E., Peytavie, A., Guérin, E., Gain, J. (2019). Terrain
@@ -54,10 +71,14 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .node import Node, cell_index, clip_index, jit_floats, opaque_float
+from .node import Node, cell_index, clip_index, jit_floats, opaque_float, shading_normals_traced
 from .packed_columns import gather_columns, pack_columns
 from .window_filters import window_max
 
+
+#: Edge of the square over which shading normals average the bilinear slope, in cells
+#: (module docstring, "Shading normals").
+SMOOTH_WIDTH = 0.25
 
 #: Largest height or extent coordinate (m), ten times Earth's radius: beyond it a value
 #: is a unit error, and the slope bound computed from it would overflow float64.
@@ -194,8 +215,12 @@ class Heightfield(Node):
         """The bilinear cell under ``(x, y)`` (``mi.Float`` each, clamped at the edges):
         its corner samples ``h00, h10, h01, h11`` and the local coordinates ``fu, fv``
         in ``[0, 1]``."""
-        u = clip_index((x - self._x0) * self._inv_dx, 0.0, self.nx - 1.0)
-        v = clip_index((y - self._y0) * self._inv_dy, 0.0, self.ny - 1.0)
+        return self._patch_at((x - self._x0) * self._inv_dx, (y - self._y0) * self._inv_dy)
+
+    def _patch_at(self, u, v):
+        """:meth:`patch` at the grid coordinates ``(u, v)`` (in cells from the first sample)."""
+        u = clip_index(u, 0.0, self.nx - 1.0)
+        v = clip_index(v, 0.0, self.ny - 1.0)
         i = dr.minimum(mi.UInt32(u), self.nx - 2)
         j = dr.minimum(mi.UInt32(v), self.ny - 2)
         fu, fv = u - mi.Float(i), v - mi.Float(j)
@@ -207,10 +232,34 @@ class Heightfield(Node):
         return gather_columns(self._maxima, k, self._maxima_width, len(self.windows))
 
     def height(self, x, y):
-        """Bilinear elevation at ``(x, y)`` (``mi.Float`` each), clamped at the edges."""
+        """Bilinear elevation at ``(x, y)`` (``mi.Float`` each), clamped at the edges;
+        inside a :func:`~.node.shading_normals` block the smooth elevation of
+        :meth:`smooth_height` (module docstring, "Shading normals")."""
+        if shading_normals_traced():
+            return self.smooth_height(x, y)
         h00, h10, h01, h11, fu, fv = self.patch(x, y)
         return dr.lerp(dr.lerp(h00, h10, fu), dr.lerp(h01, h11, fu), fv)
 
+    def smooth_height(self, x, y):
+        """The bilinear elevation averaged over the square of ``SMOOTH_WIDTH`` cells
+        centred on ``(x, y)`` (module docstring, "Shading normals"): C1, within the
+        range of the bilinear slopes around."""
+        u = (x - self._x0) * self._inv_dx - 0.5 * SMOOTH_WIDTH
+        v = (y - self._y0) * self._inv_dy - 0.5 * SMOOTH_WIDTH
+        h = mi.Float(0.0)
+        for pu, wu in _box_pieces(u, SMOOTH_WIDTH):
+            for pv, wv in _box_pieces(v, SMOOTH_WIDTH):
+                h00, h10, h01, h11, fu, fv = self._patch_at(pu, pv)
+                h += (wu * wv) * dr.lerp(dr.lerp(h00, h10, fu), dr.lerp(h01, h11, fu), fv)
+        return h
+
+    def smooth_slopes(self, x, y):
+        """``(h_x, h_y)`` of :meth:`smooth_height`, by central differences a
+        thousandth of a cell apart."""
+        ex, ey = 1e-3 * self.dx, 1e-3 * self.dy
+        hx = (self.smooth_height(x + ex, y) - self.smooth_height(x - ex, y)) * (0.5 / ex)
+        hy = (self.smooth_height(x, y + ey) - self.smooth_height(x, y - ey)) * (0.5 / ey)
+        return hx, hy
     def eval(self, p):
         return dr.minimum(self.height(p.x, p.y) - p.z, self._box(p))
 
@@ -310,6 +359,17 @@ class Heightfield(Node):
 
     def nbytes(self):
         return 64 + self.heights_np.size * 4 * (1 + len(self.windows))
+
+
+def _box_pieces(a, width):
+    """The parts of the interval ``[a, a + width]`` (grid coordinates, ``width <= 1``)
+    either side of the integer ``s = floor(a) + 1``: their midpoints and their shares
+    of the interval, ``((m0, w0), (m1, w1))``. On each part the clamped bilinear
+    elevation is linear, so its mean is its value at the midpoint."""
+    b = a + width
+    e = dr.minimum(dr.floor(a) + 1.0, b)
+    w0 = (e - a) * (1.0 / width)
+    return ((a + e) * 0.5, w0), ((e + b) * 0.5, 1.0 - w0)
 
 
 def _window_max(H: np.ndarray, w: int) -> np.ndarray:

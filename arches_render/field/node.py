@@ -298,6 +298,31 @@ def one_sided_lanes():
     return _ONE_SIDED
 
 
+#: Whether a :func:`shading_normals` block is being traced.
+_SHADING = False
+
+
+@contextlib.contextmanager
+def shading_normals():
+    """Trace the evaluations inside this block for a shading normal: nodes whose
+    surface is only C0 by construction answer with a C1 stand-in of it (a heightfield:
+    its bilinear elevation averaged over a cell, see
+    :meth:`.heightfield.Heightfield.height`), so that the normal turns smoothly
+    across the DEM's cell edges, as a mesh's interpolated vertex normals do, while
+    hits stay on the exact surface. Read at trace time, as :func:`one_sided` is."""
+    global _SHADING
+    outer, _SHADING = _SHADING, True
+    try:
+        yield
+    finally:
+        _SHADING = outer
+
+
+def shading_normals_traced() -> bool:
+    """Whether a :func:`shading_normals` block encloses the code being traced."""
+    return _SHADING
+
+
 def refill(answers, skipped, fill=0.0):
     """``answers`` (one per level not ``skipped``, in order, then any extra items) with
     ``mi.Float(fill)`` put back at the ``skipped`` levels: for nodes that answer levels

@@ -154,17 +154,15 @@ class HeightfieldCaster:
 
         Hybrid trees: the sphere tracer's (gradient of the full field). Otherwise
         the hit is exact and the normal analytic: ``(-h_x, -h_y, 1)`` normalized from
-        the bilinear patch under ``p`` (the cell :meth:`Heightfield.height` uses), or
-        the face normal where the clipping box is the nearer part of
-        ``min(h - z, box)``.
+        the slopes of the heightfield's C1 stand-in (:meth:`Heightfield.smooth_slopes`,
+        its module docstring, "Shading normals"), or the face normal where the
+        clipping box is the nearer part of ``min(h - z, box)``.
         """
         if self.hybrid:
             return self.sphere.surface(p, t, d, cone)
         hf = self.plan.heightfield
-        h00, h10, h01, h11, fu, fv = hf.patch(p.x, p.y)
-        top = dr.lerp(dr.lerp(h00, h10, fu), dr.lerp(h01, h11, fu), fv) - p.z
-        hx = dr.lerp(h10 - h00, h11 - h01, fv) * hf._inv_dx
-        hy = dr.lerp(h01 - h00, h11 - h10, fu) * hf._inv_dy
+        top = hf.height(p.x, p.y) - p.z
+        hx, hy = hf.smooth_slopes(p.x, p.y)
         n = dr.normalize(mi.Vector3f(-hx, -hy, 1.0))
         # Nearest face of the clipping box (largest signed outside distance).
         lo, hi = self._clip

@@ -32,7 +32,7 @@ import numpy as np
 from ..field import gradient
 from ..field.culling import with_culling
 from ..field.lod import Footprint
-from ..field.node import finite_box, one_sided
+from ..field.node import finite_box, one_sided, shading_normals
 from .march import (SECOND_PASS_FACTOR, March, ShadowProbe, march_result, position_ulps, ray_box, relaxed_step,
                     secant_probe)
 from .sun_columns import SUN_HALF_ANGLE, SunColumns
@@ -225,7 +225,9 @@ class SphereTracer:
         # Gradient taps half the tolerance apart, never below the float32 resolution of p.
         h = dr.maximum(0.5 * self.eps * t, position_ulps(p, 64.0))
         fp = self.footprint(cone, t)
-        g = gradient(self.field, p, h, culled=True, footprint=fp)
+        # The normal of the C1 stand-ins (a heightfield's bicubic: shading_normals).
+        with shading_normals():
+            g = gradient(self.field, p, h, culled=True, footprint=fp)
         f = self.field.eval_bounds(p, (), footprint=fp)[0]
         g2 = dr.squared_norm(g)
         step = dr.select(g2 > 0.0, f / g2, 0.0)
