@@ -61,7 +61,8 @@ def test_smooth_slopes_are_continuous_across_cell_edges_and_bilinear_inside(roof
     inside = (np.minimum(fx, 1 - fx) > 0.51 * SMOOTH_WIDTH) & (np.minimum(fy, 1 - fy) > 0.51 * SMOOTH_WIDTH)
     smooth, bilinear = _numpy(hf.smooth_height(mi.Float(xs), mi.Float(ys)), hf.height(mi.Float(xs), mi.Float(ys)))
     assert inside.sum() > 1000
-    np.testing.assert_allclose(smooth[inside], bilinear[inside], atol=2e-5 * 40.0)  # (float32 of 40 m)
+    # (float32 rounding of heights up to 40 m: ulp 4e-6, a few operations)
+    np.testing.assert_allclose(smooth[inside], bilinear[inside], atol=2e-5 * 40.0)
     assert np.max(np.abs(smooth - bilinear)[~inside]) > 0.05  # (the edges are rounded)
     # It is the mean of the bilinear elevation over the square (midpoint rule, 64^2).
     m = 64
@@ -69,6 +70,8 @@ def test_smooth_slopes_are_continuous_across_cell_edges_and_bilinear_inside(roof
     ox, oy = (a.ravel() for a in np.meshgrid(off, off))
     px, py = xs[:200, None] + ox[None], ys[:200, None] + oy[None]
     mean = _numpy(hf.height(mi.Float(px.ravel()), mi.Float(py.ravel())))[0].reshape(200, -1).mean(axis=1)
+    # (the midpoint rule's error where the square holds a kink: a slope jump of 4 sampled
+    # every 2.5 m / 64 = 4 cm, under 4 x 0.04 / 8 x its share of the square; ~1e-3 seen)
     np.testing.assert_allclose(smooth[:200], mean, atol=5e-3)
 
 
@@ -93,6 +96,9 @@ def test_tracers_give_heightfields_smooth_normals_and_keep_their_hits(roofs, tra
         dr.eval(q, n)
         normals.append(np.stack(_numpy(n.x, n.y, n.z), axis=1))
         if tracer == "sphere":
+            # (the points start on the bilinear surface, f = 0 up to float32 rounding of
+            # 40 m heights, so the Newton step f / |g| along the smooth normal is tiny; it
+            # may move up to eps t = 2 cm, and 2 mm catches a step from a wrong f)
             np.testing.assert_allclose(_numpy(q.z)[0], _numpy(hf.height(q.x, q.y))[0], atol=2e-3)
     turn = np.degrees(np.arccos(np.clip(np.sum(normals[0] * normals[1], axis=1), -1, 1)))
     # The bilinear normals either side are ~(-2, ., 1) and ~(2, ., 1): 127 degrees apart;

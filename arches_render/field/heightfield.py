@@ -46,15 +46,17 @@ grass below 28 degrees, scree, snow) changes abruptly there, and a few metres fr
 camera the DEM's cells showed as squares of scree in the grass (Maunga Whau's
 overview), where the mesh of the same field, shaded with interpolated vertex normals,
 blends smoothly. Normals are therefore taken, inside a :func:`~.node.shading_normals`
-block, from ``h~``, the bilinear elevation averaged over the square of one cell centred
-on the point (a box filter): its gradient is the average of the bilinear gradient over
+block, from ``h~``, the bilinear elevation averaged over the square of
+:data:`SMOOTH_WIDTH` (a quarter) of a cell centred on the point (a box filter): its gradient is the average of the bilinear gradient over
 that square, continuous everywhere and within the range of the slopes around, so no
 normal leans further than the surface does (a bicubic Catmull-Rom interpolant, tried
 first, overshoots at the gorge's ledges: its normals turned from the camera and the
-default scene's grass showed black streaks). The square is cut by the grid lines into
+default scene's grass showed black streaks; a square of half a cell thinned the grass
+on its ledges, one or two cells wide, towards their walls' slope). The square is cut by the grid lines into
 at most four pieces on each of which the elevation is bilinear, and a bilinear
 function's mean over a rectangle is its value at the centre: four lookups. ``|h~ - h|``
-is at most an eighth of a cell times the largest change of slope across an edge. Hits,
+is at most an eighth of the square's edge times the largest change of slope across an
+edge. Hits,
 bounds and every value outside the block keep the bilinear surface.
 
 References
@@ -260,6 +262,7 @@ class Heightfield(Node):
         hx = (self.smooth_height(x + ex, y) - self.smooth_height(x - ex, y)) * (0.5 / ex)
         hy = (self.smooth_height(x, y + ey) - self.smooth_height(x, y - ey)) * (0.5 / ey)
         return hx, hy
+
     def eval(self, p):
         return dr.minimum(self.height(p.x, p.y) - p.z, self._box(p))
 

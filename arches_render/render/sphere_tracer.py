@@ -225,7 +225,7 @@ class SphereTracer:
         # Gradient taps half the tolerance apart, never below the float32 resolution of p.
         h = dr.maximum(0.5 * self.eps * t, position_ulps(p, 64.0))
         fp = self.footprint(cone, t)
-        # The normal of the C1 stand-ins (a heightfield's bicubic: shading_normals).
+        # The normal of the C1 stand-ins (a heightfield's box-filtered elevation: shading_normals).
         with shading_normals():
             g = gradient(self.field, p, h, culled=True, footprint=fp)
         f = self.field.eval_bounds(p, (), footprint=fp)[0]

@@ -124,22 +124,23 @@ class RayCaster:
         TriangleMesh(scene=self.scene, vertices=(V - self.origin).astype(np.float32),
                      indices=np.asarray(mesh.faces, dtype=np.int32))
 
+    def _rays(self, origins, directions, max_distance):
+        """Embree's arguments: float32 origins in the mesh's frame, directions, tfar."""
+        o = (np.asarray(origins, dtype=np.float64) - self.origin).astype(np.float32)
+        return o, np.asarray(directions, dtype=np.float32), np.full(len(o), np.float32(max_distance), dtype=np.float32)
+
     def hit_distance(self, origins, directions, max_distance):
         """Distance to the first hit along each ray, ``inf`` when it is farther than ``max_distance``."""
-        o = (np.asarray(origins, dtype=np.float64) - self.origin).astype(np.float32)
-        d = np.asarray(directions, dtype=np.float32)
-        far = np.float32(max_distance)
-        dists = np.full(len(o), far, dtype=np.float32)
-        # A miss returns the ray's tfar unchanged: compare in float32, where it is exactly `far`.
+        o, d, dists = self._rays(origins, directions, max_distance)
+        # A miss returns the ray's tfar unchanged: compare in float32, where it is exactly tfar.
         t = np.asarray(self.scene.run(o, d, dists=dists, query="DISTANCE"), dtype=np.float32)
-        return np.where(t < far, t.astype(np.float64), np.inf)
+        return np.where(t < np.float32(max_distance), t.astype(np.float64), np.inf)
 
     def first_hit(self, origins, directions, max_distance):
         """``(t, n)``: :meth:`hit_distance` and the unit normal of the triangle hit
         (``(N, 3)``, its winding's side; 0 on a miss)."""
-        o = (np.asarray(origins, dtype=np.float64) - self.origin).astype(np.float32)
-        d = np.asarray(directions, dtype=np.float32)
-        out = self.scene.run(o, d, dists=np.full(len(o), np.float32(max_distance), dtype=np.float32), output=1)
+        o, d, dists = self._rays(origins, directions, max_distance)
+        out = self.scene.run(o, d, dists=dists, output=1)
         hit = np.asarray(out["primID"]) >= 0
         n = np.asarray(out["Ng"], dtype=np.float64)
         n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
