@@ -104,8 +104,11 @@ from __future__ import annotations
 
 import drjit as dr
 import mitsuba as mi
+import numpy as np
 
 from arches_render.field.node import box_distance, one_sided_lanes
+from arches_render.field.noise import fbm_lipschitz
+from arches_render.field.window_filters import window_max
 
 from .falloff import G_SLOPE, falloff_slope_max
 
@@ -263,3 +266,61 @@ def below_all(threshold, c) -> bool:
     alone for such a level, so the loop over the primitives need not compute its
     geometric bounds (renders are bitwise the same)."""
     return isinstance(c, (int, float)) and threshold - c < -1e-6 * max(1.0, abs(c))
+
+
+def distance_slopes(node):
+    """``L_i`` (float64, per primitive): the slope bound of the star distance ``d~`` of each
+    primitive of the set ``node`` inside its support (:mod:`.skeletal_set`, "Lipschitz bound")."""
+    R, c = node.radius_np, node.core_np
+    if not node.noise:
+        return 1.0 / R
+    nz = node.noise
+    span = nz["span"]
+    slope_n = fbm_lipschitz(int(nz["octaves"]), nz["lacunarity"], nz["gain"]) / nz["wavelength"]
+    dmin, dmax = R * (1.0 - span), R * (1.0 + span)
+    segment = (np.linalg.norm(node.b_np - node.a_np, axis=1) > 0).astype(np.float64)
+    return 1.0 / dmin + R * nz["amplitude"] * slope_n * (segment * dmax + c + R) / dmin ** 2
+
+
+def cell_tables(node, prim_slope, start, count, index):
+    """The set's per-cell slope and value bounds (:mod:`.skeletal_set`, "Lipschitz bound"
+    and "Local bounds").
+
+    Parameters
+    ----------
+    node : SkeletalSet
+        The set (its energies, groups, combination and grid).
+    prim_slope : ndarray
+        ``|e_i| G_SLOPE L_i`` per primitive.
+    start, count, index : ndarray
+        The dense CSR cell lists (support boxes).
+
+    Returns
+    -------
+    (cell_L, cell_M, lipschitz, value_max, value_min)
+        Per cell (dense, ``(z, y, x)`` order), the 3x3x3-neighbourhood maxima of the
+        summed slope bounds and of the summed positive energies (per group maxima;
+        ``"max"``: maxima); the largest sum of slopes, and the range of ``F``.
+    """
+    e = node.energy_np
+    n_cells = len(count)
+    cell_of = np.repeat(np.arange(n_cells), count)
+    if node.combine == "max":
+        cell_l = np.zeros(n_cells)
+        cell_m = np.zeros(n_cells)
+        np.maximum.at(cell_l, cell_of, prim_slope[index])
+        np.maximum.at(cell_m, cell_of, np.maximum(e[index], 0.0))
+        cell_lo = np.zeros(n_cells)
+    else:
+        grp = node.group_np[index]
+        # Entries of one (cell, group) are contiguous: reduce each run.
+        run = np.r_[True, (cell_of[1:] != cell_of[:-1]) | (grp[1:] != grp[:-1])]
+        starts = np.flatnonzero(run)
+        run_cell = cell_of[starts]
+        run_e = e[index][starts]
+        cell_l = np.bincount(run_cell, np.maximum.reduceat(prim_slope[index], starts), minlength=n_cells)
+        cell_m = np.bincount(run_cell, np.maximum(run_e, 0.0), minlength=n_cells)
+        cell_lo = np.bincount(run_cell, np.minimum(run_e, 0.0), minlength=n_cells)
+    shape = tuple(int(v) for v in node.res[::-1])  # (z, y, x) as the cell index
+    return (window_max(cell_l.reshape(shape), 3).ravel(), window_max(cell_m.reshape(shape), 3).ravel(),
+            float(cell_l.max()), float(cell_m.max()), float(cell_lo.min()))

@@ -14,6 +14,15 @@ core ``c`` (8), energy ``e`` (9), group id (10, uint32 bits), ``R (1 + span)`` (
 ``[a != b]`` (12), the star noise's slope factor ``R A L_n`` (13), ``D_min`` (14), the
 star distance's slope ``L_d`` (15) (:mod:`.skeletal_set`, :mod:`.skeletal_bounds`).
 Slots a set has no use for hold 0.
+
+Point records. A set of points without noise or curves (the sea's carving spheres, 48,143
+at the paper's scale) reads only ``a``, ``R``, ``c``, ``e``, ``D_min`` and ``L_d``: its
+32-byte record (:func:`pack_point_records`, ``POINT_RECORD`` floats: ``a`` (0-2), ``R``
+(3), ``c`` (4), ``e`` (5), ``D_min`` (6), ``L_d`` (7)) halves the records' memory
+(3.08 -> 1.54 MB at Sea scale). :func:`gather_point` returns the same
+:class:`Primitive` with the constants a point implies: ``b - a = 0`` and
+``1 / |b - a|^2 = 0`` (the projection ``t = 0``, as ``0 * 1e30`` gave), ``D_max = R``
+(``R (1 + 0)``), no group, segment or noise factor; values and bounds keep their bits.
 """
 
 from __future__ import annotations
@@ -27,6 +36,8 @@ from arches_render.field.packed_columns import gather_columns, pack_columns, uin
 
 #: Floats a record (one 64-byte cache line).
 RECORD = 16
+#: Floats a point record (half a cache line).
+POINT_RECORD = 8
 
 
 class Primitive(NamedTuple):
@@ -94,3 +105,46 @@ def gather_primitive(records, k) -> Primitive:
     v = gather_columns(records, k, RECORD, RECORD)
     return Primitive(mi.Point3f(v[0], v[1], v[2]), mi.Vector3f(v[3], v[4], v[5]), v[6], v[7], v[8], v[9],
                      uint_column(v[10]), v[11], v[12], v[13], v[14], v[15])
+
+
+def pack_point_records(a, R, core, e, Dmin, Ld) -> mi.Float:
+    """The 32-byte records of ``n`` points without noise or curves (module docstring).
+
+    Parameters
+    ----------
+    a : ndarray
+        ``(n, 3)`` centres.
+    R, core, e : ndarray
+        ``(n,)`` radii of influence, core radii and energies.
+    Dmin, Ld : ndarray
+        ``(n,)`` float32 constants of the bounds (kept as given).
+
+    Returns
+    -------
+    mi.Float
+        ``n * POINT_RECORD`` floats, point after point.
+    """
+    records, width = pack_columns([a[:, 0], a[:, 1], a[:, 2], R, core, e, Dmin, Ld])
+    assert width == POINT_RECORD
+    return records
+
+
+def gather_point(records, k) -> Primitive:
+    """:class:`Primitive` ``k`` (per lane) from :func:`pack_point_records`' records, in one
+    packet gather, with the constants a point implies (module docstring).
+
+    Parameters
+    ----------
+    records : mi.Float
+        The records of :func:`pack_point_records`.
+    k : mi.UInt32
+        Point index per lane.
+
+    Returns
+    -------
+    Primitive
+    """
+    v = gather_columns(records, k, POINT_RECORD, POINT_RECORD)
+    zero = mi.Float(0.0)
+    return Primitive(mi.Point3f(v[0], v[1], v[2]), mi.Vector3f(0.0), zero, v[3], v[4], v[5], mi.UInt32(0),
+                     v[3], zero, zero, v[6], v[7])

@@ -85,15 +85,14 @@ import numpy as np
 from arches_render.field.lod import OctaveLOD
 from arches_render.field.node import Node, box_distance, opaque_float, refill
 from arches_render.field.noise import fbm, fbm_lipschitz
-from arches_render.field.window_filters import window_max
-from arches_render.field.brick_grid import BrickLayout, list_entry
+from arches_render.field.brick_grid import BRICK, BrickLayout, list_entry
 from arches_render.field.primitive_set import empty_distance, grid_lists, unlisted_gaps
 
 from .falloff import G_SLOPE, g_dr
-from .skeletal_bounds import (FAR, below_all, core_bound, footprint_error, level_bound, level_shape, local_slope,
-                              quiet_within, slant_cap, slanted_bound)
+from .skeletal_bounds import (FAR, below_all, cell_tables, core_bound, distance_slopes, footprint_error, level_bound,
+                              level_shape, local_slope, quiet_within, slant_cap, slanted_bound)
 from .skeletal_params import noise_params, primitive_arrays
-from .skeletal_records import RECORD, gather_primitive, pack_records
+from .skeletal_records import POINT_RECORD, RECORD, gather_point, gather_primitive, pack_point_records, pack_records
 
 #: Largest radius of the balls in which ``eval_local`` bounds slopes, in cell edges.
 SLOPE_REACH = 0.125
@@ -177,13 +176,15 @@ class SkeletalSet(Node):
         self.grid_lo, self.cell, self.res = self.support_lo.copy(), cell, res
         start, count, index = grid_lists(lo_p, hi_p, self.grid_lo, cell, res)
         self.max_per_cell, self.list_len = int(count.max()), len(index)
-        self._per_prim_lipschitz = self._prim_lipschitz()
+        slopes = distance_slopes(self)
+        prim_slope = np.abs(e) * G_SLOPE * slopes  # |e_i| G_SLOPE L_i (module docstring)
         # Slope of the star distance d~ per primitive (module docstring, "Local slopes").
         span0 = self.noise["span"] if self.noise else 0.0
         Dmin = np.ascontiguousarray(R * (1.0 - span0) * (1.0 - 1e-6), dtype=np.float32)
-        Ld = np.ascontiguousarray(self._distance_slopes(), dtype=np.float32) * np.float32(1.0 + 1e-6)
+        Ld = np.ascontiguousarray(slopes, dtype=np.float32) * np.float32(1.0 + 1e-6)
         reach_R = seg = noise_K = None
-        self._cell_bounds(start, count, index)
+        cell_l, cell_m, self._lipschitz, self.value_max, self.value_min = cell_tables(
+            self, prim_slope, start, count, index)
         # Levels below the threshold ({F >= u}, u > 0) exist only with positive energies:
         # their distance bounds (module docstring) use the empty cells and, per
         # primitive, the region that holds {F_i >= u}, over lists of the support boxes
@@ -194,12 +195,20 @@ class SkeletalSet(Node):
         # whole cell were 5-10x longer in dense karst lattices, and a ball that
         # large holds the steepest point of some falloff anyway).
         self.local_radius = SLOPE_REACH * cell
-        slope = grid_lists(lo_p - self.local_radius, hi_p + self.local_radius, self.grid_lo, cell, res)
+        # The points of a carving set list only the cells their grown support, a ball,
+        # touches (a primitive farther away adds exactly 0 to every value and bound of
+        # the loop; Sea scale: 1.24 M -> 0.91 M entries). The other lists stay boxes:
+        # the near lists' unlisted gaps and the cell tables are measured box to box.
+        # The balls are a ten-thousandth of a cell wider: a float32 point near a cell's
+        # face may be found in it, and a slope near the edge of a grown support is not 0.
+        points = self._points_only(a, b)
+        balls = (a, c + R + self.local_radius * (1.0 + 1e-3)) if points and self.value_max <= 0 else None
+        slope = grid_lists(lo_p - self.local_radius, hi_p + self.local_radius, self.grid_lo, cell, res, balls)
         # Cells are stored in bricks (8^3, or as thin as the grid) only where some per-cell
         # datum is not 0 (empty bricks read 0 and list nothing, as their cells held): along
         # a coast most of the box is air or rock that no primitive reaches.
-        cell_L = self.cell_lipschitz_np.astype(np.float32) * np.float32(1.0 + 1e-6)
-        cell_M = self.cell_value_max_np.astype(np.float32) * np.float32(1.0 + 1e-6)
+        cell_L = cell_l.astype(np.float32) * np.float32(1.0 + 1e-6)
+        cell_M = cell_m.astype(np.float32) * np.float32(1.0 + 1e-6)
         nonzero = (count > 0) | (slope[1] > 0) | (cell_L > 0) | (cell_M > 0)
         near = empty = None
         if self.value_max > 0:
@@ -210,18 +219,29 @@ class SkeletalSet(Node):
                                      UNLISTED_REACH * cell).astype(np.float32)
         entries = len(index) + len(slope[2]) + (len(near[2]) if near is not None else 0)
         self._narrow = self.n < 1 << 16 and entries >= NARROW_LISTS
-        self.layout = BrickLayout.of_cells(nonzero, self.grid_lo, cell, res)
+        # Bricks that take the least memory (a carving set's band along a coast: 2^3).
+        # A set that adds matter keeps bricks of 8^3: its unstored bricks answer the
+        # smallest empty distance of their cells, and with smaller bricks some cells
+        # that stored their own lose it (goblins: camera rays 37.5 -> 39.0 steps).
+        edges = (BRICK,) if near is not None else (BRICK, BRICK // 2, BRICK // 4)
+        self.layout = BrickLayout.of_cells(nonzero, self.grid_lo, cell, res, *self._stored_bytes(near is not None),
+                                           edges)
         compact = self.layout.compact
-        self._slope_lists = self._compact_lists(*slope)
-        self.slope_len = len(slope[2])
+        # Two lists a cell at most. The wide lists serve the bounds: the near lists of a
+        # set that adds matter (a superset of the slope lists, which it then never
+        # reads), the slope lists of a carving set. The values loop over the cell lists,
+        # the shortest, except in a carving set: there they loop over its slope lists
+        # (primitives listed but not touching a point add exactly 0, in the same order
+        # of primitives: the same bits), and the cell lists are not kept (Sea scale:
+        # 11.5 -> 8.6 MB, 932k entries and an offset a cell; its values loop over 1.33x
+        # the entries).
         self._empty = self._near = None
-        self.near_len = 0
         if near is not None:
             self._empty = mi.Float(compact(empty))
             self._brick_empty = mi.Float(self.layout.brick_min(empty).astype(np.float32))
             self._near = self._compact_lists(*near)
             self._unlisted = mi.Float(compact(unlisted))
-            self.near_len = len(near[2])
+            self._wide, self.wide_len = self._near, len(near[2])
             reach_R = np.ascontiguousarray(R * (1.0 + span), dtype=np.float32)
             if self.noise:
                 nz = self.noise
@@ -231,13 +251,20 @@ class SkeletalSet(Node):
             self._support_lo = [opaque_float(v) for v in self.support_lo]
             self._support_hi = [opaque_float(v) for v in self.support_hi]
             self._peak = opaque_float(self.value_max * (1.0 + 1e-6))  # float32 e may round up
-        self._cell_L, self._cell_M = mi.Float(compact(cell_L)), mi.Float(compact(cell_M))
-        del self.cell_lipschitz_np, self.cell_value_max_np  # dense: only their stored cells are kept
+        else:
+            self._wide, self.wide_len = self._compact_lists(*slope), len(slope[2])
+        # A carving set's value tables are 0 everywhere: not stored (local_lipschitz).
+        self._cell_L = mi.Float(compact(cell_L))
+        self._cell_M = mi.Float(compact(cell_M)) if self.value_max > 0 else None
         self._cell_edge = opaque_float(cell)
         self._near_reach = opaque_float(NEAR_REACH * cell)
 
-        self._lists = self._compact_lists(start, count, index)
-        self._records = pack_records(a, b, R, c, e, grp, reach_R, seg, noise_K, Dmin, Ld)
+        self._lists = self._compact_lists(start, count, index) if near is not None else self._wide
+        # Points without noise or curves: 32-byte records (.skeletal_records, "Point records").
+        self._record_floats = POINT_RECORD if points else RECORD
+        self._gather = gather_point if points else gather_primitive
+        self._records = (pack_point_records(a, R, c, e, Dmin, Ld) if points else
+                         pack_records(a, b, R, c, e, grp, reach_R, seg, noise_K, Dmin, Ld))
         self._glo_box = ([opaque_float(v) for v in self.grid_lo],
                          [opaque_float(v) for v in self.grid_lo + cell * res])
         self._threshold = opaque_float(self.threshold_np)
@@ -256,53 +283,6 @@ class SkeletalSet(Node):
             self._lod = OctaveLOD(nz["octaves"], nz["lacunarity"], nz["gain"], 1.0, nz["wavelength"])
 
     # -- bounds of the math -----------------------------------------------------
-    def _prim_lipschitz(self):
-        """``|e_i| G_SLOPE L_i`` per primitive (module docstring)."""
-        return np.abs(self.energy_np) * G_SLOPE * self._distance_slopes()
-
-    def _distance_slopes(self):
-        """``L_i``: the slope bound of the star distance ``d~`` of each primitive
-        inside its support (module docstring)."""
-        R, c = self.radius_np, self.core_np
-        if not self.noise:
-            L = 1.0 / R
-        else:
-            nz = self.noise
-            span = nz["span"]
-            slope_n = fbm_lipschitz(int(nz["octaves"]), nz["lacunarity"], nz["gain"]) / nz["wavelength"]
-            dmin, dmax = R * (1.0 - span), R * (1.0 + span)
-            segment = (np.linalg.norm(self.b_np - self.a_np, axis=1) > 0).astype(np.float64)
-            L = 1.0 / dmin + R * nz["amplitude"] * slope_n * (segment * dmax + c + R) / dmin ** 2
-        return L
-
-    def _cell_bounds(self, start, count, index):
-        """Per-cell gradient bounds and value ranges (per group maxima), and their
-        3x3x3-neighbourhood maxima for local distance bounds (see ``local_lipschitz``)."""
-        lp, e = self._per_prim_lipschitz, self.energy_np
-        n_cells = len(count)
-        cell_of = np.repeat(np.arange(n_cells), count)
-        if self.combine == "max":
-            cell_l = np.zeros(n_cells)
-            cell_m = np.zeros(n_cells)
-            np.maximum.at(cell_l, cell_of, lp[index])
-            np.maximum.at(cell_m, cell_of, np.maximum(e[index], 0.0))
-            cell_lo = np.zeros(n_cells)
-        else:
-            grp = self.group_np[index]
-            # Entries of one (cell, group) are contiguous: reduce each run.
-            run = np.r_[True, (cell_of[1:] != cell_of[:-1]) | (grp[1:] != grp[:-1])]
-            starts = np.flatnonzero(run)
-            run_cell = cell_of[starts]
-            run_e = e[index][starts]
-            cell_l = np.bincount(run_cell, np.maximum.reduceat(lp[index], starts), minlength=n_cells)
-            cell_m = np.bincount(run_cell, np.maximum(run_e, 0.0), minlength=n_cells)
-            cell_lo = np.bincount(run_cell, np.minimum(run_e, 0.0), minlength=n_cells)
-        self._lipschitz = float(cell_l.max())
-        self.value_max, self.value_min = float(cell_m.max()), float(cell_lo.min())
-        shape = tuple(int(v) for v in self.res[::-1])  # (z, y, x) as the cell index
-        self.cell_lipschitz_np = window_max(cell_l.reshape(shape), 3).ravel()
-        self.cell_value_max_np = window_max(cell_m.reshape(shape), 3).ravel()
-
     @property
     def lipschitz(self):
         return max(self._lipschitz, 1e-12)
@@ -362,12 +342,24 @@ class SkeletalSet(Node):
         """``(offset, entries)`` over the stored cells, 16-bit where ``_narrow`` (``list_entry``)."""
         return tuple(mi.UInt32(v) for v in self.layout.compact_lists(start, count, index, self._narrow))
 
+    def _points_only(self, a, b):
+        """Whether the set holds points without noise or curves (32-byte records, and a
+        carving set's lists by ball: :mod:`.skeletal_records`, ``__init__``)."""
+        return not self.noise and not self.grouped and np.array_equal(a, b)
+
+    @staticmethod
+    def _stored_bytes(adds_matter):
+        """Bytes a stored cell and a brick of the layout take: the wide list's offset and
+        L; for a set that adds matter M, the cell list's offset, the empty distance and the
+        unlisted gap, and a brick's empty distance."""
+        return (24, 8) if adds_matter else (8, 4)
+
     def nbytes(self):
-        # Per stored cell: offset, L, M, slope offset [empty, near offset, gap].
-        per_cell = 16 + (12 if self._near is not None else 0)
+        per_cell, per_brick = self._stored_bytes(self._near is not None)
         entry = 2 if self._narrow else 4
-        lists = (self.list_len + self.near_len + self.slope_len) * entry
-        return 64 + self.n * RECORD * 4 + self.layout.stored_cells * per_cell + self.layout.nbytes() + lists
+        lists = (self.wide_len + (self.list_len if self._lists is not self._wide else 0)) * entry
+        records = self.n * self._record_floats * 4
+        return 64 + records + self.layout.stored_cells * per_cell + len(self.layout.slots_np) * per_brick + lists
 
     # -- evaluation ---------------------------------------------------------------
     def _cell(self, p):
@@ -470,7 +462,7 @@ class SkeletalSet(Node):
         zeros = tuple(mi.Float(0.0) for _ in radii)
         if self.combine == "max" or not self.grouped:
             def body(i, acc, *rest):
-                prim = gather_primitive(self._records, list_entry(index_a, start + i, self._narrow))
+                prim = self._gather(self._records, list_entry(index_a, start + i, self._narrow))
                 e, gk, ds, sl = visit(prim, rest[:n_u])
                 v = e * gk
                 # Union (max): one primitive at a time sets the slope; sum: they add.
@@ -483,7 +475,7 @@ class SkeletalSet(Node):
             return acc, rest[:n_u], rest[n_u:]
 
         def body_g(i, acc, cur_g, best, cur_e, *rest):
-            prim = gather_primitive(self._records, list_entry(index_a, start + i, self._narrow))
+            prim = self._gather(self._records, list_entry(index_a, start + i, self._narrow))
             grp = prim.group
             e, gk, ds, sl = visit(prim, rest[:n_u])
             new = grp != cur_g
@@ -512,8 +504,8 @@ class SkeletalSet(Node):
         ``|grad F| <= L`` and ``F <= M`` (maxima over the 3x3x3 cells around ``p``'s
         cell, which hold that ball; 0 far from every primitive)."""
         cell, stored, _, _ = self._cell(p)
-        return (dr.gather(mi.Float, self._cell_L, cell, stored), dr.gather(mi.Float, self._cell_M, cell, stored),
-                self._cell_edge)
+        M = mi.Float(0.0) if self._cell_M is None else dr.gather(mi.Float, self._cell_M, cell, stored)
+        return dr.gather(mi.Float, self._cell_L, cell, stored), M, self._cell_edge
 
     def eval_bounds(self, p, levels, direction=None, footprint=None):
         return self.eval_local(p, levels, direction, footprint)[:2]
@@ -548,7 +540,7 @@ class SkeletalSet(Node):
             # Caps need the near lists (a superset of the slope lists); cores need
             # only the primitives whose support holds p. Levels below every value keep
             # Hart's bound (below): no geometric bounds per primitive (:func:`below_all`).
-            lists = self._near if self._near is not None else self._slope_lists
+            lists = self._wide
             skipped = [not carving and below_all(self.threshold_np, c) for c in levels] if us else []
             F, found, slopes = self._accumulate(p, lists, [u for u, s in zip(us, skipped) if not s], footprint,
                                                 radii, slants, direction)
