@@ -26,7 +26,8 @@ from scipy.ndimage import gaussian_filter, zoom
 
 import arches_render  # noqa: F401  (chooses the libLLVM before Dr.Jit loads)
 from arches_render.generators.terrain.amplify import amplify
-from arches_render.generators.terrain.scene_writer import scene_document, toml_text
+from arches_render.generators.terrain.scene_writer import scene_document
+from arches_render.tomlfile import toml_text
 
 REPO = Path(__file__).resolve().parents[1]
 GALLERY = REPO / "scenes" / "gallery"

@@ -39,7 +39,7 @@ def test_render_meters_unless_the_scene_sets_an_exposure(tmp_path):
     from arches_render.imaging.exr import read_exr
     from PIL import Image
 
-    from arches_render.generators.terrain.scene_writer import toml_text
+    from arches_render.tomlfile import toml_text
     src = tomlfile.load(SCENES / "default.toml")
     (tmp_path / "data").mkdir()   # the scene's DEM at the path it names (a scene reads only inside its folder)
     shutil.copy(SCENES / "data" / "default_gorge.heights.npy", tmp_path / "data")

@@ -139,7 +139,7 @@ def test_fallen_blocks_carry_the_beds_of_the_cliff_above_them(tmp_path, capsys):
     import mitsuba as mi
 
     from arches_render import tomlfile
-    from arches_render.generators.terrain.scene_writer import toml_text
+    from arches_render.tomlfile import toml_text
     from arches_render.materials.masks import PALETTES, strata_index
     from arches_render.render.renderer import load_materials
     from arches_render.scene import load_scene

@@ -84,6 +84,12 @@ def test_auto_coast_gets_sea_reaching_the_horizon(tmp_path, capsys):
     # rel 1e-2: the header prints the cliff height to three significant digits (a rounding
     # of at most 0.5 %); the scene's value comes from the unrounded height.
     assert rock == pytest.approx(min(max(0.2 * cliff, 6.0), 30.0), rel=1e-2), (rock, cliff)
+    # The sea mirrors the sky (a dielectric coat, not a diffuse paint lit pale by the sun),
+    # and the preview rolls the sky's highlights off (ACES's view, not a clip).
+    doc = tomllib.loads(text)
+    water = doc["materials"][doc["far_field"][0]["water_material"]]
+    assert water["type"] == "glossy" and water["ior"] == pytest.approx(1.333), water
+    assert doc["render"]["view"] == "aces"
     # Rendered: no pixel below the horizon sees past the sea, no prism wall (the close shots face
     # the cliffs from the water: their top rows may be rock).
     desc = load_scene(out)

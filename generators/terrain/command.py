@@ -56,7 +56,7 @@ from arches_render.field.heightmaps import DEMError, read_dem
 from .amplify import PRESET_NAMES
 from .fallback import amplify_soft
 from .presets import PRESETS
-from .scene_writer import toml_text
+from arches_render.tomlfile import toml_text
 
 #: Default largest DEM processed (cells); larger ones are averaged down.
 MAX_CELLS = 8192 * 8192

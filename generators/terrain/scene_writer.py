@@ -22,7 +22,8 @@ Ground and water
     The far field (``[[far_field]]``, :mod:`.far_field`) continues the terrain to
     the horizon in the same material (without the terms that read the tile's fallen
     blocks: :func:`far_material`), and the sea with it where the sea reaches
-    the tile's border; the water surfaces of the tile (:mod:`.water`) are a mesh.
+    the tile's border; the water surfaces of the tile (:mod:`.water`) are a mesh, in
+    :data:`WATER`, a dark base under a dielectric coat that mirrors the sky.
     Tiles of a kilometre or more get an ``[atmosphere]``: distance reads as haze,
     thinned on tiles wider than a third of :data:`HAZE_RANGE_M` so that the air's
     meteorological range is :data:`HAZE_WIDTHS` tile widths (default air, turbidity 3,
@@ -33,14 +34,16 @@ Material
     snow and a 100 m one not all sand; the rock coloured by the preset's own
     geology (strata palette, cavity, wetness at sea level:
     :func:`arches_render.materials.masks.terrain_look`).
+Preview
+    The PNG beside the EXR goes through ACES 2.0's view (:data:`VIEW`), as a camera's
+    picture goes through a tone curve: the sky and sunlit ground keep their detail
+    beside shaded rock.
 """
 
 from __future__ import annotations
 
 import copy
-import json
 import math
-import re
 from pathlib import Path
 
 import numpy as np
@@ -50,7 +53,7 @@ from arches_render.materials.masks import PALETTES, terrain_look
 from .continued_relief import ContinuedRelief
 from .presets import PRESETS
 
-__all__ = ["toml_text", "frame_camera", "landscape_material", "sun_for", "scene_document", "LANDFORM_NAMES"]
+__all__ = ["frame_camera", "landscape_material", "sun_for", "scene_document", "LANDFORM_NAMES"]
 
 #: Meteorological range of the default air (turbidity 3; :mod:`arches_render.render.atmosphere`),
 #: metres: tiles wider than a third of it get thinner air (``density = HAZE_RANGE_M /
@@ -62,64 +65,23 @@ HAZE_RANGE_M = 20000.0
 #: tile seen that way was a blue-grey murk; at three its hills read to the far side.
 HAZE_WIDTHS = 3.0
 
+#: The water's material: a dark blue-green base under water's dielectric coat (GGX,
+#: ``ior`` 1.333), as the gallery's sea scenes have it. Water mirrors the sky, dark
+#: looking down and bright towards the horizon (Fresnel). A diffuse blue-green
+#: (the first material) lit the sea pale cyan wherever the sun fell on it, with the
+#: cliffs' shadows cut out of it as hard dark shapes (Devil's Slide's sea caves).
+WATER = {"type": "glossy", "color": [0.02, 0.05, 0.06], "roughness": 0.05, "ior": 1.333}
+
+#: The previews' view transform (:mod:`arches_render.imaging.colour`): ACES 2.0's, whose
+#: shoulder rolls the highlights off. A landscape's close shot puts a shaded wall, a
+#: sunlit floor and the sky in one frame, and the metered exposure that reads the wall
+#: clipped the rest: NM's canyon floor a featureless pale tan and its sky white,
+#: Devil's Slide's sky and sea one white band. The EXR keeps the linear numbers.
+VIEW = "aces"
+
 #: Camera names of the close shots, per preset.
 LANDFORM_NAMES = {"sea": "sea_cave", "river": "undercut", "karst": "tunnel", "hoodoos": "hoodoos",
                   "strata": "cliff"}
-
-_BARE = re.compile(r"^[A-Za-z0-9_-]+$")
-
-
-def _key(k):
-    return k if _BARE.match(k) else json.dumps(k)
-
-
-def _value(v):
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, (int, np.integer)):
-        return str(int(v))
-    if isinstance(v, (float, np.floating)):
-        v = float(v)
-        if not math.isfinite(v):
-            raise ValueError(f"cannot write a non-finite number ({v}) to a scene file")
-        return repr(v)  # shortest exact form: the file rebuilds the very tree that was made
-    if isinstance(v, str):
-        return json.dumps(v)  # a JSON string is a valid TOML basic string
-    if isinstance(v, (list, tuple, np.ndarray)):
-        return "[" + ", ".join(_value(x) for x in v) + "]"
-    if isinstance(v, dict):
-        return "{ " + ", ".join(f"{_key(k)} = {_value(x)}" for k, x in v.items()) + " }"
-    raise TypeError(f"cannot write {type(v).__name__} to a scene file")
-
-
-def toml_text(doc, header=""):
-    """TOML text of a scene document.
-
-    Parameters
-    ----------
-    doc : dict
-        Top-level keys map to tables (dicts of scalars, arrays and inline tables),
-        arrays of tables (lists of dicts: ``[[lights]]``), or, for ``nodes`` and
-        ``materials`` and ``cameras``, dicts of named tables (``[nodes.NAME]``).
-    header : str
-        Comment lines put first (without the ``#``).
-
-    Returns
-    -------
-    str
-    """
-    out = [f"# {line}".rstrip() for line in header.splitlines()]
-    for name, body in doc.items():
-        if isinstance(body, list):
-            for item in body:
-                out += ["", f"[[{_key(name)}]]"] + [f"{_key(k)} = {_value(v)}" for k, v in item.items()]
-        elif name in ("nodes", "materials", "cameras"):
-            for sub, table in body.items():
-                out += ["", f"[{_key(name)}.{_key(sub)}]"] + [f"{_key(k)} = {_value(v)}" for k, v in table.items()]
-        else:
-            out += ["", f"[{_key(name)}]"] + [f"{_key(k)} = {_value(v)}" for k, v in body.items()]
-    return "\n".join(out).lstrip("\n") + "\n"
-
 
 def frame_camera(heights, extent, features=None, fov=50.0, elevation=10.0, margin=0.5, aspect=16 / 9,
                  sea_level=None):
@@ -546,7 +508,7 @@ def scene_document(result, name, work_dir, progress=None, close=3):
         "scene": {"name": name,
                   "description": f"DEM amplified with the '{result.preset}' preset (seed {stats['seed']}): "
                                  f"{stats['nodes']} nodes, {stats['primitives']} primitives"},
-        "render": {"resolution": [640, 360], "spp": 32, "max_depth": 3},
+        "render": {"resolution": [640, 360], "spp": 32, "max_depth": 3, "view": VIEW},
         "cameras": cameras,
         "lights": [sun_for(sun_views(shots[0] if shots else None))],
         "materials": {"landscape": landscape_material(zlo, zhi, result.sea_level, *_geology(result),
@@ -567,7 +529,7 @@ def scene_document(result, name, work_dir, progress=None, close=3):
         if "strata" in mat and "strata_blocks" in look:  # the blocks carry their cliff's beds
             mat["strata"]["blocks"] = look["strata_blocks"]
     if water is not None and water.wet:
-        doc["materials"]["water"] = {"type": "diffuse", "color": [0.03, 0.09, 0.12]}
+        doc["materials"]["water"] = dict(WATER)
         if result.water_file:
             doc["meshes"] = [{"file": result.water_file, "material": "water"}]
         if water.touches_border:
