@@ -26,10 +26,12 @@ Acceleration: the primitives' support boxes (skeleton box grown by
 ``c_i + R_i (1 + A N)``, ``N`` the fBm range) are listed per cell of a uniform grid
 (CSR lists built by :func:`arches_render.field.primitive_set.grid_lists`, the
 grid of :class:`~arches_render.field.CapsuleSet`; the per-cell arrays are then
-kept only in the bricks (8^3, thinner for a thin grid) where some datum is not 0,
+kept only in the bricks (8^3, thinner for a thin grid, smaller for a carving set's
+band where that takes less memory) where some datum is not 0,
 :class:`~arches_render.field.brick_grid.BrickLayout`); a point loops over its own
 cell's list in one Dr.Jit ``while_loop``. Unlike the capsule set this is *exact*:
-a primitive missing from the cell contributes exactly 0 there (compact support).
+a primitive missing from the cell contributes exactly 0 there (compact support), so
+the points of a carving set list only the cells their (grown) ball touches.
 The noise of a listed primitive is evaluated only where ``max(r - c, 0) < R (1 + A N)``.
 
 Lipschitz bound (derived). Inside the support (``d~ < 1``), with ``rho = max(r - c, 0)``,
@@ -199,13 +201,13 @@ class SkeletalSet(Node):
         # touches (a primitive farther away adds exactly 0 to every value and bound of
         # the loop; Sea scale: 1.24 M -> 0.91 M entries). The other lists stay boxes:
         # the near lists' unlisted gaps and the cell tables are measured box to box.
-        # The balls are a ten-thousandth of a cell wider: a float32 point near a cell's
-        # face may be found in it, and a slope near the edge of a grown support is not 0.
+        # The balls are a thousandth of the slope reach wider (an eight-thousandth of a
+        # cell): a float32 point near a cell's face may be found in it, and a slope near
+        # the edge of a grown support is not 0.
         points = self._points_only(a, b)
         balls = (a, c + R + self.local_radius * (1.0 + 1e-3)) if points and self.value_max <= 0 else None
         slope = grid_lists(lo_p - self.local_radius, hi_p + self.local_radius, self.grid_lo, cell, res, balls)
-        # Cells are stored in bricks (8^3, or as thin as the grid) only where some per-cell
-        # datum is not 0 (empty bricks read 0 and list nothing, as their cells held): along
+        # Cells are stored in bricks (below) only where some per-cell datum is not 0 (empty bricks read 0 and list nothing, as their cells held): along
         # a coast most of the box is air or rock that no primitive reaches.
         cell_L = cell_l.astype(np.float32) * np.float32(1.0 + 1e-6)
         cell_M = cell_m.astype(np.float32) * np.float32(1.0 + 1e-6)
