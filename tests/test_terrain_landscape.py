@@ -560,3 +560,24 @@ def test_scree_covers_gentle_ground_above_the_grass_in_the_rocks_mean_colour():
     # Gentle ground only: the beds still show where the rock stands steep.
     layers = {layer.name: layer for layer in preset_layers("terrain", cone)[0]}
     assert layers["sand"].slope_max + layers["sand"].slope_soft <= 30.0
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32, np.int32])
+def test_label_extrema_are_scipys(dtype):
+    """``hydrology.label_extrema``: per label the same minima and maxima as
+    ``scipy.ndimage.minimum`` / ``maximum`` (the same numbers and dtype), labels from
+    ``ndimage.label`` and from a dilation of them (as ``_cliff_height`` uses)."""
+    from scipy import ndimage
+
+    from arches_render.generators.terrain.hydrology import label_extrema
+    rng = np.random.default_rng(3)
+    values = (rng.normal(0, 100, (300, 200)) * (1 if dtype != np.int32 else 1)).astype(dtype)
+    lab, n = ndimage.label(rng.random((300, 200)) < 0.3)
+    for labels in (lab, ndimage.grey_dilation(lab, size=(1, 3))):
+        lo, hi = label_extrema(values, labels, n)
+        idx = np.arange(1, n + 1)
+        want_lo = np.asarray(ndimage.minimum(values, labels, idx))
+        want_hi = np.asarray(ndimage.maximum(values, labels, idx))
+        assert lo.dtype == (np.float64 if dtype == np.int32 else dtype)
+        np.testing.assert_array_equal(lo, want_lo.astype(lo.dtype))
+        np.testing.assert_array_equal(hi, want_hi.astype(hi.dtype))

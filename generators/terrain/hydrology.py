@@ -40,7 +40,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["fill_depressions", "flow_accumulation", "slope", "stream_power", "pits"]
+__all__ = ["fill_depressions", "flow_accumulation", "slope", "stream_power", "pits", "label_extrema"]
 
 #: Row and column offsets of the eight neighbours (shared with landscape_evolution).
 NEIGHBOUR_DI = np.array([-1, -1, -1, 0, 0, 1, 1, 1], dtype=np.int64)
@@ -298,3 +298,37 @@ def pits(heights):
         lower &= H[1 + a:ny - 1 + a, 1 + b:nx - 1 + b] > c
     rc = np.argwhere(lower) + 1
     return rc[np.argsort(H[rc[:, 0], rc[:, 1]], kind="stable")].astype(np.int64)
+
+
+def label_extrema(values, labels, n):
+    """The smallest and largest of ``values`` over the cells of each label ``1..n``.
+
+    What ``scipy.ndimage.minimum`` and ``maximum`` (with ``index = 1..n``) return, the same
+    numbers, read with ``numpy.minimum.at`` / ``maximum.at`` over the labelled cells
+    only. Why not scipy's: it sorts every cell by label first; on the Sea-scale coast
+    (1025^2 cells, a twentieth labelled) a call took 0.2-0.4 s, this one 0.01 s.
+
+    Parameters
+    ----------
+    values : array_like
+        Values per cell.
+    labels : numpy.ndarray
+        Integer labels of the same shape (0: no label), as ``scipy.ndimage.label`` gives.
+    n : int
+        The largest label.
+
+    Returns
+    -------
+    (numpy.ndarray, numpy.ndarray)
+        ``(n,)`` minima and maxima in ``values``' float dtype (float64 for integers;
+        ``+inf`` and ``-inf`` for a label with no cell).
+    """
+    lab = np.asarray(labels).ravel()
+    at = np.flatnonzero(lab)
+    v = np.asarray(values)
+    v = v.astype(v.dtype if v.dtype.kind == "f" else np.float64).ravel()[at]  # scipy keeps a float dtype
+    lab = lab[at]
+    lo, hi = np.full(n + 1, np.inf, dtype=v.dtype), np.full(n + 1, -np.inf, dtype=v.dtype)
+    np.minimum.at(lo, lab, v)
+    np.maximum.at(hi, lab, v)
+    return lo[1:], hi[1:]

@@ -74,7 +74,7 @@ import math
 
 import numpy as np
 
-from .hydrology import fill_depressions, flow_accumulation
+from .hydrology import fill_depressions, flow_accumulation, label_extrema
 
 __all__ = ["ANALYSIS_CELLS", "analysis_grid", "sea_mask", "terrain_stats", "choose_preset", "has_walls",
            "landform_scales"]
@@ -207,9 +207,8 @@ def _analyse(heights, cell_size, sea_level):
     lab, n = ndimage.label(dep, structure=np.ones((3, 3), bool))
     up = 0
     if n:
-        idx = np.arange(1, n + 1)
-        floor = ndimage.minimum(H, lab, idx)
-        up = int((np.asarray(floor) > zlo + 0.5 * R).sum())
+        floor = label_extrema(H, lab, n)[0]
+        up = int((floor > zlo + 0.5 * R).sum())
     st.update(depression_fraction=float(dep.sum() / nland), depressions=int(n), depressions_upland=up)
     st["cliff_height_m"] = _cliff_height(H, slope >= _STEEP_DEG, land, a)
     return st, dict(H=H, a=a, sea=sea, land=land, slope=slope, chan=chan)
@@ -251,8 +250,8 @@ def _cliff_height(H, steep, land, a):
         if n == 0:
             continue
         grown = ndimage.grey_dilation(lab, footprint=st)
-        idx = np.arange(1, n + 1)
-        rng = np.asarray(ndimage.maximum(H, grown, idx)) - np.asarray(ndimage.minimum(H, grown, idx))
+        lo, hi = label_extrema(H, grown, n)
+        rng = hi - lo
         length = (np.bincount(lab.ravel(), minlength=n + 1)[1:] + 1) * a
         heights.append(rng[rng >= math.tan(math.radians(_STEEP_DEG)) * length])
     h = np.concatenate(heights) if heights else np.zeros(0)

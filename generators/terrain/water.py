@@ -58,7 +58,7 @@ import numpy as np
 import trimesh
 from scipy import ndimage
 
-from .hydrology import NEIGHBOUR_DI, NEIGHBOUR_DJ, fill_depressions
+from .hydrology import NEIGHBOUR_DI, NEIGHBOUR_DJ, fill_depressions, label_extrema
 from .preset_choice import sea_mask
 
 __all__ = ["WaterBodies", "find_water", "water_mesh", "LAKE_DEPTH_M", "LAKE_DEPTH_RELIEF", "LAKE_CATCHMENT_SHARE",
@@ -132,10 +132,9 @@ def find_water(heights, sea_level=0.0, lakes=True):
         wet = (depth > 1e-6) & ~sea
         lab, n = ndimage.label(wet, structure=np.ones((3, 3), bool))
         if n:
-            idx = np.arange(1, n + 1)
-            deepest = np.asarray(ndimage.maximum(depth, lab, idx))
+            deepest = label_extrema(depth, lab, n)[1]
             cells = np.bincount(lab.ravel(), minlength=n + 1)[1:]
-            spill = np.asarray(ndimage.maximum(filled, lab, idx))
+            spill = label_extrema(filled, lab, n)[1]
             # Cells draining straight into each depression: steepest descent ends in it.
             catchment = np.bincount(lab.ravel()[descent_sinks(H).ravel()], minlength=n + 1)[1:]
             boxes = ndimage.find_objects(lab)
