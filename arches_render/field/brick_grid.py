@@ -109,8 +109,8 @@ class BrickLayout:
 
         Bricks of each edge of ``edges`` (no deeper than the grid on a thin axis,
         :func:`brick_shape`) are tried; each costs ``brick_bytes`` a brick of the top
-        grid (its slot, and any per-brick datum) and ``cell_bytes`` a stored cell. Why: a coast's carving spheres
-        touch a narrow band of cells; at Sea scale (48,143 primitives, a grid of
+        grid (its slot, and any per-brick datum) and ``cell_bytes`` a stored cell.
+        Why: a coast's carving spheres touch a narrow band of cells; at Sea scale (48,143 primitives, a grid of
         416 x 416 x 4) bricks of 8 x 8 x 4 stored 255k cells, bricks of 2^3 153k for a
         top grid of 87k bricks (2.4 -> 1.6 MB). A dense set keeps its bricks of 8^3 (the
         lookup is the same shifts and masks).

@@ -207,7 +207,8 @@ class SkeletalSet(Node):
         points = self._points_only(a, b)
         balls = (a, c + R + self.local_radius * (1.0 + 1e-3)) if points and self.value_max <= 0 else None
         slope = grid_lists(lo_p - self.local_radius, hi_p + self.local_radius, self.grid_lo, cell, res, balls)
-        # Cells are stored in bricks (below) only where some per-cell datum is not 0 (empty bricks read 0 and list nothing, as their cells held): along
+        # Cells are stored in bricks (below) only where some per-cell datum is not 0
+        # (empty bricks read 0 and list nothing, as their cells held): along
         # a coast most of the box is air or rock that no primitive reaches.
         cell_L = cell_l.astype(np.float32) * np.float32(1.0 + 1e-6)
         cell_M = cell_m.astype(np.float32) * np.float32(1.0 + 1e-6)
