@@ -177,10 +177,14 @@ class BrickLayout:
         entries = np.asarray(index)[at]
         return offset.astype(np.uint32), pack_narrow(entries) if narrow else np.ascontiguousarray(entries, np.uint32)
 
+    def blocks(self, dense, fill) -> np.ndarray:
+        """A dense ``(z, y, x)`` flat per-cell array as ``(brick, z, y, x)`` blocks, one a
+        brick of the top grid, padded past the grid with ``fill``."""
+        return self._bricked(np.asarray(dense), self.res, fill, self.shape)
+
     def brick_min(self, dense) -> np.ndarray:
         """Per brick, the smallest entry of a dense per-cell array over the brick's cells."""
-        dense = np.asarray(dense)
-        return self._bricked(dense, self.res, np.inf, self.shape).min(axis=(1, 2, 3))
+        return self.blocks(dense, np.inf).min(axis=(1, 2, 3))
 
     def cell_coordinates(self, p):
         """``(fx, fy, fz)``: ``p`` in cell units from the grid's corner (``mi.Float``)."""

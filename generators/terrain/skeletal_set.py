@@ -95,6 +95,7 @@ from .skeletal_bounds import (FAR, below_all, cell_tables, core_bound, distance_
                               level_shape, local_slope, quiet_within, slant_cap, slanted_bound)
 from .skeletal_params import noise_params, primitive_arrays
 from .skeletal_records import POINT_RECORD, RECORD, gather_point, gather_primitive, pack_point_records, pack_records
+from .support_distances import brick_centre_distances, centre_distances, centre_offsets
 
 #: Largest radius of the balls in which ``eval_local`` bounds slopes, in cell edges.
 SLOPE_REACH = 0.125
@@ -240,8 +241,11 @@ class SkeletalSet(Node):
         # the entries).
         self._empty = self._near = None
         if near is not None:
-            self._empty = mi.Float(compact(empty))
+            # Distances from the cells' and bricks' centres to the supports (.support_distances).
+            centres = centre_distances(a, b, c + R * (1.0 + span), self.grid_lo, cell, res, empty)
+            self._empty = mi.Float(compact(centres))
             self._brick_empty = mi.Float(self.layout.brick_min(empty).astype(np.float32))
+            self._brick_centre = mi.Float(brick_centre_distances(centres, self.layout))
             self._near = self._compact_lists(*near)
             self._unlisted = mi.Float(compact(unlisted))
             self._wide, self.wide_len = self._near, len(near[2])
@@ -581,8 +585,10 @@ class SkeletalSet(Node):
             # positive energy, so {F >= u} is empty for every u > 0.
             ds = [dr.select(u > 0.0, FAR, dr.select(u < 0.0, dr.maximum(d, g), d)) for d, g, u in zip(ds, geo, us)]
         elif us or slants:
-            empty = dr.select(stored, dr.gather(mi.Float, self._empty, cell, stored),
-                              dr.gather(mi.Float, self._brick_empty, brick, ~stored))
+            to_cell, to_brick = centre_offsets(self.layout, p, self._cell_edge)
+            empty = dr.select(stored, dr.gather(mi.Float, self._empty, cell, stored) - to_cell,
+                              dr.maximum(dr.gather(mi.Float, self._brick_empty, brick, ~stored),
+                                         dr.gather(mi.Float, self._brick_centre, brick, ~stored) - to_brick))
             outside = box_distance(p, self._support_lo, self._support_hi)
             # A primitive left out of the near list is at least the cell's unlisted gap
             # away (NEAR_REACH cell edges at least; cells not stored list nothing).
