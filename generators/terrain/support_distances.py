@@ -41,7 +41,6 @@ from __future__ import annotations
 
 import drjit as dr
 import mitsuba as mi
-import numba
 import numpy as np
 
 from arches_render.field.node import cell_index
@@ -52,38 +51,6 @@ __all__ = ["brick_centre_distances", "centre_distances", "centre_offsets", "REAC
 #: farther ones take the gap's bound. Goblins (320x180): 6 instead of 3 took camera rays
 #: from 33.6 to 33.4 steps, shadow rays from 32.0 to 31.8, for 8x the build's loop.
 REACH_CELLS = 3
-
-
-@numba.njit(cache=True)
-def _centre_minima(a, b, reach, glo, cell, res, margin, out):
-    """``out[z, y, x] = min(out, |c - s_i(c)| - reach_i)`` over the primitives whose box
-    grown by ``margin`` overlaps the cell, ``c`` the cell's centre."""
-    rx, ry, rz = res[0], res[1], res[2]
-    for i in range(a.shape[0]):
-        lo = np.empty(3, np.int64)
-        hi = np.empty(3, np.int64)
-        for k in range(3):
-            m = min(a[i, k], b[i, k]) - reach[i] - margin
-            M = max(a[i, k], b[i, k]) + reach[i] + margin
-            lo[k] = max(int(np.floor((m - glo[k]) / cell)), 0)
-            hi[k] = min(int(np.floor((M - glo[k]) / cell)), res[k] - 1)
-        bax, bay, baz = b[i, 0] - a[i, 0], b[i, 1] - a[i, 1], b[i, 2] - a[i, 2]
-        len2 = bax * bax + bay * bay + baz * baz
-        for z in range(lo[2], hi[2] + 1):
-            cz = glo[2] + (z + 0.5) * cell
-            for y in range(lo[1], hi[1] + 1):
-                cy = glo[1] + (y + 0.5) * cell
-                for x in range(lo[0], hi[0] + 1):
-                    cx = glo[0] + (x + 0.5) * cell
-                    px, py, pz = cx - a[i, 0], cy - a[i, 1], cz - a[i, 2]
-                    t = 0.0
-                    if len2 > 0.0:
-                        t = min(max((px * bax + py * bay + pz * baz) / len2, 0.0), 1.0)
-                    dx, dy, dz = px - t * bax, py - t * bay, pz - t * baz
-                    d = np.sqrt(dx * dx + dy * dy + dz * dz) - reach[i]
-                    if d < out[z, y, x]:
-                        out[z, y, x] = d
-    return out
 
 
 def centre_distances(a, b, reach, grid_lo, cell, res, gaps):
@@ -108,13 +75,14 @@ def centre_distances(a, b, reach, grid_lo, cell, res, gaps):
         float32 rounding of centres and points at the grid's coordinates, so that a
         float32 ``D(c) - |p - c|`` never overstates ``d(p)``.
     """
+    from .support_kernels import centre_minima  # numba on use: scenes without sets skip its import
     res = np.asarray(res, dtype=np.int64)
     glo = np.asarray(grid_lo, dtype=np.float64)
     cell = float(cell)
     far = REACH_CELLS * cell + 0.5 * cell
     out = np.full(tuple(res[::-1]), far, dtype=np.float64)
-    _centre_minima(np.ascontiguousarray(a, dtype=np.float64), np.ascontiguousarray(b, dtype=np.float64),
-                   np.ascontiguousarray(reach, dtype=np.float64), glo, cell, res, REACH_CELLS * cell, out)
+    centre_minima(np.ascontiguousarray(a, dtype=np.float64), np.ascontiguousarray(b, dtype=np.float64),
+                  np.ascontiguousarray(reach, dtype=np.float64), glo, cell, res, REACH_CELLS * cell, out)
     # A cell with a gap touches no support box: the nearest support lies beyond its box,
     # h / 2 from the centre at least (a cell a support box touches has no gap, and the
     # supports near it are its candidates).
