@@ -14,7 +14,8 @@ import mitsuba as mi  # noqa: E402
 
 from arches_render.field import evaluate  # noqa: E402
 from arches_render.generators.terrain.skeletal_set import SkeletalSet  # noqa: E402
-from arches_render.generators.terrain.support_distances import REACH_CELLS, brick_centre_distances, centre_distances  # noqa: E402
+from arches_render.generators.terrain.support_distances import (REACH_CELLS, brick_centre_distances,  # noqa: E402
+                                                                  centre_distances)
 
 
 def _clusters(seed=3):

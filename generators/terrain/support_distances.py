@@ -20,16 +20,19 @@ of ``d(c)``: the exact minimum over the primitives whose support box grown by ``
 edges overlaps the cell, and ``K h + h / 2`` for the others (their support box is more
 than ``K h`` from the cell box, and the centre lies ``h / 2`` inside it), and never less
 than ``G + h / 2`` where the box-to-box gap ``G`` is positive (the nearest support lies
-beyond it, and the centre ``h / 2`` inside its box). Since ``d`` is 1-Lipschitz, at any point ``p``
+beyond it, and the centre ``h / 2`` inside its box). Since ``d`` is 1-Lipschitz, at any
+point ``p``
 
     d(p) >= D(c) - |p - c|,
 
 which a tracer evaluates with the centre of the cell it looked ``p`` up in (whichever
 that is: the inequality holds for any ``c``). Where the cells are not stored (bricks
 with no datum, far from the supports) a brick's centre ``b`` gets the bound
-``max_c (D(c) - |b - c|)`` over its cells ``c``, used the same way: the bricks' smallest
-gap was a cell or two where one hoodoo stood near a brick's corner, and it held the
-goblins' camera rays, 130 m above the hoodoo field, to steps of one cell.
+``max_c (D(c) - |b - c|)`` over its cells ``c``, used the same way beside the bricks'
+smallest gap (goblins, 320x180: shadow rays 33.9 -> 32.0 steps, bounce 30.1 -> 28.8).
+It loses up to the brick's half-diagonal (63 m there): the goblins' camera, 130 m above
+the hoodoo field, still takes its first steps a cell (9 m) at a time, where the terrain
+alone would allow 80 m.
 
 References
 ----------
