@@ -289,3 +289,20 @@ def test_narrow_lists_read_back_every_entry():
     assert int(np.max(wide)) > 60000
     with pytest.raises(ValueError):
         brick_grid.pack_narrow([3, 65536])
+
+
+def test_half_up_rounds_every_value_up_within_a_part_in_1024():
+    """Per-cell upper bounds stored as float16 stay upper bounds (skeletal sets' L and M)."""
+    rng = np.random.default_rng(4)
+    v = np.concatenate([np.minimum(rng.lognormal(0.0, 4.0, 100_000), 6e4), [0.0, 1e-9, 6e-8, 1.0, 65504.0]])
+    v = v.astype(np.float32)
+    h = brick_grid.half_up(v)
+    assert h.dtype == np.float16
+    back = h.astype(np.float32)
+    assert np.all(back >= v)
+    # Above float16's smallest normal (6.1e-5) the step is a part in 1024 of the value.
+    normal = v >= 6.2e-5
+    assert np.all(back[normal] <= v[normal] * (1.0 + 2.0 ** -10) * (1.0 + 1e-7))
+    assert back[np.flatnonzero(v == 0.0)[0]] == 0.0
+    assert brick_grid.half_up(np.float32([1.0, 70000.0])) is None
+    assert brick_grid.half_up(np.float32([1.0, np.inf])) is None

@@ -45,7 +45,7 @@ import numpy as np
 from .node import cell_index, opaque_float
 
 __all__ = ["BrickGrid", "BrickLayout", "BRICK", "brick_shape", "DENSE_EDT_CELLS", "MAX_BRICKS", "cell_gaps",
-           "list_entry", "pack_narrow"]
+           "half_up", "list_entry", "pack_narrow"]
 
 #: Cells along a brick's edge (a power of two: cell -> brick is a shift).
 BRICK = 8
@@ -209,6 +209,20 @@ class BrickLayout:
     def nbytes(self) -> int:
         """Bytes of the top grid."""
         return len(self.slots_np) * 4
+
+
+def half_up(values):
+    """``values`` as float16, each rounded *up* to the next float16 (never below it), or
+    ``None`` when one is beyond float16's range or not finite. Why: per-cell upper bounds
+    (slopes, value maxima) in half the bytes stay upper bounds; they grow by at most a
+    part in 1024 (float16's 10-bit mantissa)."""
+    v = np.asarray(values, dtype=np.float32)
+    if v.size and not (np.all(np.isfinite(v)) and float(np.max(np.abs(v))) <= 65504.0):
+        return None
+    h = v.astype(np.float16)
+    low = h.astype(np.float32) < v
+    h[low] = np.nextafter(h[low], np.float16(np.inf))
+    return h
 
 
 def pack_narrow(entries) -> np.ndarray:

@@ -106,6 +106,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from arches_render.field.brick_grid import half_up
 from arches_render.field.node import box_distance, one_sided_lanes
 from arches_render.field.noise import fbm_lipschitz
 from arches_render.field.window_filters import window_max
@@ -116,7 +117,7 @@ from .falloff import G_SLOPE, falloff_slope_max
 FAR = 1e10
 
 __all__ = ["level_shape", "level_bound", "slant_cap", "slanted_bound", "core_bound", "local_slope", "footprint_error", "quiet_within",
-           "below_all"]
+           "below_all", "stored_tables"]
 
 
 def level_shape(node, e, u, skip=False):
@@ -255,7 +256,7 @@ def quiet_within(node, p, reach):
     slope table of their cell is 0 (it covers one cell edge around it), or they are
     farther than ``reach`` from the grid that holds every support."""
     cell, stored, _, inside = node._cell(p)
-    quiet = inside & (dr.gather(mi.Float, node._cell_L, cell, stored) == 0.0) & (reach <= node.cell)
+    quiet = inside & (dr.gather(node._table, node._cell_L, cell, stored) == 0.0) & (reach <= node.cell)
     return quiet | (~inside & (box_distance(p, node._glo_box[0], node._glo_box[1]) > reach))
 
 
@@ -324,3 +325,19 @@ def cell_tables(node, prim_slope, start, count, index):
     shape = tuple(int(v) for v in node.res[::-1])  # (z, y, x) as the cell index
     return (window_max(cell_l.reshape(shape), 3).ravel(), window_max(cell_m.reshape(shape), 3).ravel(),
             float(cell_l.max()), float(cell_m.max()), float(cell_lo.min()))
+
+
+def stored_tables(cell_l, cell_m):
+    """The cell tables of :func:`cell_tables` as a set stores them: ``(L, M, dtype)``.
+
+    float32 grown by a part in 10^6 (the float32 rounding of their sums), then float16
+    rounded up where both fit (:func:`~arches_render.field.brick_grid.half_up`: 2 bytes
+    a cell each, and the bounds they give grow by at most a part in 1024), the Dr.Jit
+    type ``mi.Float16``; else float32, ``mi.Float``.
+    """
+    L = cell_l.astype(np.float32) * np.float32(1.0 + 1e-6)
+    M = cell_m.astype(np.float32) * np.float32(1.0 + 1e-6)
+    halves = half_up(L), half_up(M)
+    if any(h is None for h in halves):
+        return L, M, mi.Float
+    return halves[0], halves[1], mi.Float16

@@ -92,7 +92,7 @@ from arches_render.field.primitive_set import empty_distance, grid_lists, unlist
 
 from .falloff import G_SLOPE, g_dr
 from .skeletal_bounds import (FAR, below_all, cell_tables, core_bound, distance_slopes, footprint_error, level_bound,
-                              level_shape, local_slope, quiet_within, slant_cap, slanted_bound)
+                              level_shape, local_slope, quiet_within, slant_cap, slanted_bound, stored_tables)
 from .skeletal_params import noise_params, primitive_arrays
 from .skeletal_records import POINT_RECORD, RECORD, gather_point, gather_primitive, pack_point_records, pack_records
 from .support_distances import brick_centre_distances, centre_distances, centre_offsets
@@ -211,8 +211,7 @@ class SkeletalSet(Node):
         # Cells are stored in bricks (below) only where some per-cell datum is not 0
         # (empty bricks read 0 and list nothing, as their cells held): along
         # a coast most of the box is air or rock that no primitive reaches.
-        cell_L = cell_l.astype(np.float32) * np.float32(1.0 + 1e-6)
-        cell_M = cell_m.astype(np.float32) * np.float32(1.0 + 1e-6)
+        cell_L, cell_M, self._table = stored_tables(cell_l, cell_m)
         nonzero = (count > 0) | (slope[1] > 0) | (cell_L > 0) | (cell_M > 0)
         near = empty = None
         if self.value_max > 0:
@@ -223,7 +222,7 @@ class SkeletalSet(Node):
                                      UNLISTED_REACH * cell).astype(np.float32)
         entries = len(index) + len(slope[2]) + (len(near[2]) if near is not None else 0)
         self._narrow = self.n < 1 << 16 and entries >= NARROW_LISTS
-        # Bricks that take the least memory (a carving set's band along a coast: 2^3).
+        # Bricks that take the least memory (a carving set's band along a coast: 4^3).
         # A set that adds matter keeps bricks of 8^3: its unstored bricks answer the
         # smallest empty distance of their cells, and with smaller bricks some cells
         # that stored their own lose it (goblins: camera rays 37.5 -> 39.0 steps).
@@ -234,11 +233,8 @@ class SkeletalSet(Node):
         # Two lists a cell at most. The wide lists serve the bounds: the near lists of a
         # set that adds matter (a superset of the slope lists, which it then never
         # reads), the slope lists of a carving set. The values loop over the cell lists,
-        # the shortest, except in a carving set: there they loop over its slope lists
-        # (primitives listed but not touching a point add exactly 0, in the same order
-        # of primitives: the same bits), and the cell lists are not kept (Sea scale:
-        # 11.5 -> 8.6 MB, 932k entries and an offset a cell; its values loop over 1.33x
-        # the entries).
+        # except in a carving set: over its slope lists (primitives listed but not touching
+        # a point add exactly 0, in the same order: the same bits; Sea scale: 11.5 -> 8.6 MB).
         self._empty = self._near = None
         if near is not None:
             # Distances from the cells' and bricks' centres to the supports (.support_distances).
@@ -261,8 +257,8 @@ class SkeletalSet(Node):
         else:
             self._wide, self.wide_len = self._compact_lists(*slope), len(slope[2])
         # A carving set's value tables are 0 everywhere: not stored (local_lipschitz).
-        self._cell_L = mi.Float(compact(cell_L))
-        self._cell_M = mi.Float(compact(cell_M)) if self.value_max > 0 else None
+        self._cell_L = self._table(compact(cell_L))
+        self._cell_M = self._table(compact(cell_M)) if self.value_max > 0 else None
         self._cell_edge = opaque_float(cell)
         self._near_reach = opaque_float(NEAR_REACH * cell)
 
@@ -354,12 +350,12 @@ class SkeletalSet(Node):
         carving set's lists by ball: :mod:`.skeletal_records`, ``__init__``)."""
         return not self.noise and not self.grouped and np.array_equal(a, b)
 
-    @staticmethod
-    def _stored_bytes(adds_matter):
+    def _stored_bytes(self, adds_matter):
         """Bytes a stored cell and a brick of the layout take: the wide list's offset and
-        L; for a set that adds matter M, the cell list's offset, the empty distance and the
-        unlisted gap, and a brick's empty distance."""
-        return (24, 8) if adds_matter else (8, 4)
+        L; for a set that adds matter M, the cell list's offset, the centre's distance and
+        the unlisted gap, and a brick's two empty distances (a brick's slot: 4 bytes)."""
+        table = 2 if self._table is mi.Float16 else 4
+        return (16 + 2 * table, 12) if adds_matter else (4 + table, 4)
 
     def nbytes(self):
         per_cell, per_brick = self._stored_bytes(self._near is not None)
@@ -511,8 +507,8 @@ class SkeletalSet(Node):
         ``|grad F| <= L`` and ``F <= M`` (maxima over the 3x3x3 cells around ``p``'s
         cell, which hold that ball; 0 far from every primitive)."""
         cell, stored, _, _ = self._cell(p)
-        M = mi.Float(0.0) if self._cell_M is None else dr.gather(mi.Float, self._cell_M, cell, stored)
-        return dr.gather(mi.Float, self._cell_L, cell, stored), M, self._cell_edge
+        M = mi.Float(0.0) if self._cell_M is None else mi.Float(dr.gather(self._table, self._cell_M, cell, stored))
+        return mi.Float(dr.gather(self._table, self._cell_L, cell, stored)), M, self._cell_edge
 
     def eval_bounds(self, p, levels, direction=None, footprint=None):
         return self.eval_local(p, levels, direction, footprint)[:2]
@@ -558,7 +554,7 @@ class SkeletalSet(Node):
         else:
             f = self.eval(p)
         cell, stored, brick, inside = self._cell(p)
-        L, r = dr.gather(mi.Float, self._cell_L, cell, stored), self._cell_edge  # (local_lipschitz)
+        L, r = mi.Float(dr.gather(self._table, self._cell_L, cell, stored)), self._cell_edge  # (local_lipschitz)
         L_glob = self.lipschitz
         if footprint is not None:
             grow = 1.0 + self.lod_kappa * footprint.rate
