@@ -35,8 +35,7 @@ SET = _clusters()
 
 def _support_distance(p):
     """Exact distance from each point to the union of the supports (capsules)."""
-    span = SET.noise["span"]
-    reach = SET.core_np + SET.radius_np * (1.0 + span)
+    reach = SET.core_np + SET.radius_np * (1.0 + SET.noise["span"])  # (written out: the test's own)
     a, ba = SET.a_np, SET.b_np - SET.a_np
     best = np.full(len(p), np.inf)
     for i in range(len(a)):
@@ -56,9 +55,7 @@ def _dense_centre_bounds():
     from arches_render.field.primitive_set import empty_distance
     lo, hi = SET.primitive_boxes()
     gaps = empty_distance(lo, hi, SET.grid_lo, SET.cell, SET.res).astype(np.float32)
-    span = SET.noise["span"]
-    return centre_distances(SET.a_np, SET.b_np, SET.core_np + SET.radius_np * (1.0 + span), SET.grid_lo,
-                            SET.cell, SET.res, gaps)
+    return centre_distances(SET.a_np, SET.b_np, SET.support_reach(), SET.grid_lo, SET.cell, SET.res, gaps)
 
 
 def test_centre_bounds_hold_and_are_exact_near_the_supports():

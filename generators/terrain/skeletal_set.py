@@ -237,8 +237,7 @@ class SkeletalSet(Node):
         # a point add exactly 0, in the same order: the same bits; Sea scale: 11.5 -> 8.6 MB).
         self._empty = self._near = None
         if near is not None:
-            # Distances from the cells' and bricks' centres to the supports (.support_distances).
-            centres = centre_distances(a, b, c + R * (1.0 + span), self.grid_lo, cell, res, empty)
+            centres = centre_distances(a, b, self.support_reach(), self.grid_lo, cell, res, empty)
             self._empty = mi.Float(compact(centres))
             self._brick_empty = mi.Float(self.layout.brick_min(empty).astype(np.float32))
             self._brick_centre = mi.Float(brick_centre_distances(centres, self.layout))
@@ -318,12 +317,14 @@ class SkeletalSet(Node):
         full = self.lod_error(radius)
         return dr.select(self.quiet_within(p, reach), 0.0, full) if full else 0.0
 
+    def support_reach(self):
+        """Per primitive, ``core + R (1 + noise span)``: farther from its segment its field is 0."""
+        return self.core_np + self.radius_np * (1.0 + (self.noise["span"] if self.noise else 0.0))
+
     def primitive_boxes(self):
         """Per-primitive support boxes ``(lo (N, 3), hi (N, 3))``: outside its box a
-        primitive's field is exactly 0 (reach ``core + R (1 + noise span)`` around its
-        segment)."""
-        span = self.noise["span"] if self.noise else 0.0
-        reach = self.core_np + self.radius_np * (1.0 + span)
+        primitive's field is exactly 0 (:meth:`support_reach` around its segment)."""
+        reach = self.support_reach()
         return (np.minimum(self.a_np, self.b_np) - reach[:, None],
                 np.maximum(self.a_np, self.b_np) + reach[:, None])
 

@@ -11,7 +11,6 @@ import numpy as np
 def centre_minima(a, b, reach, glo, cell, res, margin, out):
     """``out[z, y, x] = min(out, |c - s_i(c)| - reach_i)`` over the primitives whose box
     grown by ``margin`` overlaps the cell, ``c`` the cell's centre."""
-    rx, ry, rz = res[0], res[1], res[2]
     for i in range(a.shape[0]):
         lo = np.empty(3, np.int64)
         hi = np.empty(3, np.int64)
