@@ -248,7 +248,7 @@ def test_compact_lists_keep_every_stored_cells_list_in_order():
     res = np.array([23, 19, 3])
     start, count, index = grid_lists(lo, hi, np.zeros(3), 2.0, res)
     layout = brick_grid.BrickLayout.of_cells(count > 0, np.zeros(3), 2.0, res)
-    offset, compact_index = layout.compact_lists(start, count, index)
+    (offset,), compact_index = layout.compact_lists(start, count, index)
     # The dense cell of each stored one (-1: a brick's padding past the grid).
     dense_of = layout.compact(np.arange(int(np.prod(res))) + 1) - 1
     listed = 0
@@ -278,9 +278,15 @@ def test_narrow_lists_read_back_every_entry():
     start, count, index = grid_lists(lo, hi, np.zeros(3), 2.0, res)
     index = index.astype(np.int64) * 211 % 65536  # entries over the whole 16-bit range
     layout = brick_grid.BrickLayout.of_cells(count > 0, np.zeros(3), 2.0, res)
-    offset, wide = layout.compact_lists(start, count, index)
-    offset_n, words = layout.compact_lists(start, count, index, narrow=True)
-    np.testing.assert_array_equal(offset, offset_n)
+    (offset,), wide = layout.compact_lists(start, count, index)
+    offsets_n, words = layout.compact_lists(start, count, index, narrow=True)
+    assert len(offsets_n) == 2  # 16-bit offsets relative to each brick's base
+    # Every stored cell's range read back from the relative offsets is its absolute one.
+    cells = mi.UInt32(np.arange(layout.stored_cells, dtype=np.uint32))
+    first, n = layout.list_range(tuple(mi.UInt32(v) for v in offsets_n), cells)
+    np.testing.assert_array_equal(first.numpy(), offset[:-1])
+    np.testing.assert_array_equal(n.numpy(), np.diff(offset))
+    assert len(offsets_n[0]) * 4 < len(offset) * 4 * 0.6  # about 2 bytes a cell, not 4
     assert len(words) == (len(wide) + 1) // 2 and len(wide) % 2 == 1  # an odd count: the pad is read too
     k = mi.UInt32(np.arange(len(wide), dtype=np.uint32))
     got = brick_grid.list_entry(mi.UInt32(words), k, True).numpy()
@@ -289,6 +295,24 @@ def test_narrow_lists_read_back_every_entry():
     assert int(np.max(wide)) > 60000
     with pytest.raises(ValueError):
         brick_grid.pack_narrow([3, 65536])
+
+
+def test_relative_offsets_fall_back_where_a_brick_lists_too_many():
+    """16-bit offsets relative to a brick's base hold while each brick lists fewer than
+    2^16 entries; a brick with more keeps 32-bit offsets (``None``), and the read-back
+    of either form gives every cell's range."""
+    bricks, cells = 3, 8
+    counts = np.full(bricks * cells, 1000)
+    offset = np.concatenate([[0], np.cumsum(counts)])
+    words, base = brick_grid.relative_offsets(offset, cells)
+    np.testing.assert_array_equal(base, [0, 8000, 16000])
+    halves = np.stack([words & 0xFFFF, words >> 16], axis=1).reshape(-1)[:bricks * (cells + 1)]
+    rel = halves.reshape(bricks, cells + 1)
+    np.testing.assert_array_equal(rel[:, -1], [8000] * 3)  # each brick's end
+    np.testing.assert_array_equal((rel[:, :-1] + base[:, None]).reshape(-1), offset[:-1])
+    counts[cells + 3] = 60000  # the second brick now lists 67,000 entries
+    offset = np.concatenate([[0], np.cumsum(counts)])
+    assert brick_grid.relative_offsets(offset, cells) is None
 
 
 def test_half_up_rounds_every_value_up_within_a_part_in_1024():

@@ -32,6 +32,7 @@ def test_sixteen_bit_lists_give_the_same_values_and_bounds_bit_for_bit(monkeypat
     monkeypatch.setattr(S, "NARROW_LISTS", 0)
     narrow = S.SkeletalSet(a, b, R, e)
     assert narrow._narrow and not wide._narrow
+    assert len(narrow._wide[0]) == 2 and len(wide._wide[0]) == 1  # offsets relative to each brick, 16-bit
     for x, y in zip(dump(wide), dump(narrow)):
         assert np.array_equal(x.view(np.uint32), y.view(np.uint32))
     assert narrow.nbytes() < wide.nbytes()

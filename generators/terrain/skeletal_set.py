@@ -343,8 +343,10 @@ class SkeletalSet(Node):
         return 3.0 + per * min(self.max_per_cell, 8)
 
     def _compact_lists(self, start, count, index):
-        """``(offset, entries)`` over the stored cells, 16-bit where ``_narrow`` (``list_entry``)."""
-        return tuple(mi.UInt32(v) for v in self.layout.compact_lists(start, count, index, self._narrow))
+        """``(offsets, entries)`` over the stored cells, 16-bit where ``_narrow``
+        (:meth:`~arches_render.field.brick_grid.BrickLayout.compact_lists`)."""
+        offsets, entries = self.layout.compact_lists(start, count, index, self._narrow)
+        return tuple(mi.UInt32(v) for v in offsets), mi.UInt32(entries)
 
     def _points_only(self, a, b):
         """Whether the set holds points without noise or curves (32-byte records, and a
@@ -352,18 +354,24 @@ class SkeletalSet(Node):
         return not self.noise and not self.grouped and np.array_equal(a, b)
 
     def _stored_bytes(self, adds_matter):
-        """Bytes a stored cell and a brick of the layout take: the wide list's offset and
-        L; for a set that adds matter M, the cell list's offset, the centre's distance and
-        the unlisted gap, and a brick's two empty distances (a brick's slot: 4 bytes)."""
+        """Bytes a stored cell and a brick of the layout take (what the layout is chosen
+        by): a list's offset (2 bytes in a narrow set, with 6 a brick for its base and
+        end: :func:`~arches_render.field.brick_grid.relative_offsets`) and L; for a set
+        that adds matter a second list, M, the centre's distance and the unlisted gap,
+        and a brick's two empty distances (a brick's slot: 4 bytes)."""
         table = 2 if self._table is mi.Float16 else 4
-        return (16 + 2 * table, 12) if adds_matter else (4 + table, 4)
+        lists = 2 if adds_matter else 1
+        offset, brick_offsets = (2, 6) if self._narrow else (4, 0)
+        per_cell = lists * offset + table + (8 + table if adds_matter else 0)
+        return per_cell, 4 + lists * brick_offsets + (8 if adds_matter else 0)
 
     def nbytes(self):
-        per_cell, per_brick = self._stored_bytes(self._near is not None)
-        entry = 2 if self._narrow else 4
-        lists = (self.wide_len + (self.list_len if self._lists is not self._wide else 0)) * entry
-        records = self.n * self._record_floats * 4
-        return 64 + records + self.layout.stored_cells * per_cell + len(self.layout.slots_np) * per_brick + lists
+        """Bytes of the arrays the set holds (records, lists, per-cell and per-brick data)."""
+        held = [self._records, *self._lists[0], self._lists[1], *self._wide[0], self._wide[1], self.layout._slots]
+        held += [getattr(self, k, None) for k in ("_cell_L", "_cell_M", "_empty", "_brick_empty", "_brick_centre",
+                                                   "_unlisted")]
+        unique = {id(a): a for a in held if a is not None}.values()
+        return 64 + sum(dr.width(a) * (2 if isinstance(a, mi.Float16) else 4) for a in unique)
 
     # -- evaluation ---------------------------------------------------------------
     def _cell(self, p):
@@ -416,7 +424,7 @@ class SkeletalSet(Node):
         return self._accumulate(p, self._lists)[0]
 
     def _accumulate(self, p, lists, us=(), footprint=None, radii=(), slants=(), direction=None):
-        """``(F(p), ds, slopes)``: the field over the cell lists ``lists`` (``offset, index``
+        """``(F(p), ds, slopes)``: the field over the cell lists ``lists`` (``offsets, index``
         of :meth:`~arches_render.field.brick_grid.BrickLayout.compact_lists`); for each
         ``u`` of ``us``, the smallest :func:`.skeletal_bounds.level_bound` over
         them (``FAR`` where none acts) or, for a carving set (no positive energy), the
@@ -435,10 +443,10 @@ class SkeletalSet(Node):
         # Bounds along the ray's line (skeletal_bounds, "Along a line"): the level bounds
         # of sets that add matter, the slopes of sets without noise.
         along = direction if direction is not None and ((n_u and not carving) or (radii and not self.noise)) else None
-        offset_a, index_a = lists
+        offsets, index_a = lists
         cell, stored, _, inside = self._cell(p)
-        start = dr.gather(mi.UInt32, offset_a, cell, stored)
-        count = dr.select(inside, dr.gather(mi.UInt32, offset_a, cell + 1, stored) - start, 0)
+        start, count = self.layout.list_range(offsets, cell, stored)
+        count = dr.select(inside, count, 0)
         # One energy for every primitive (the hoodoos preset): each level's shape is
         # per lane, not per primitive, and leaves the loop.
         shapes = [level_shape(self, self._shared_energy, u, carving) for u in us]
