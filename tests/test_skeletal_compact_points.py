@@ -1,5 +1,5 @@
 """Sets of points in less memory (generators/terrain/skeletal_set.py, skeletal_records.py;
-arches_render/field/brick_grid.py ``BrickLayout.of_cells``): 32-byte point records, a
+arches_render/field/brick_grid.py ``BrickLayout.of_cells``): 16-byte point records and their energies, a
 carving set's lists by ball and without its cell lists, bricks of the least memory. The
 same values and bounds, bit for bit."""
 
@@ -39,7 +39,7 @@ def _dump(s, p, d):
 def test_point_sets_keep_their_values_and_bounds_in_less_memory(monkeypatch, energy_sign):
     """A set of points (no noise, no curves) evaluates and bounds every point exactly as the
     same set stored with the general 64-byte records and box lists (``_points_only``
-    patched to False), in less memory: its records are half as large and a carving
+    patched to False), in less memory: 20 bytes a point instead of 64, and a carving
     set's lists list only the cells each grown ball touches."""
     import mitsuba as mi
     from arches_render.generators.terrain import skeletal_set as S
@@ -58,10 +58,10 @@ def test_point_sets_keep_their_values_and_bounds_in_less_memory(monkeypatch, ene
     compact = S.SkeletalSet(a, None, R, e, 0.0, threshold=threshold)
     monkeypatch.setattr(S.SkeletalSet, "_points_only", lambda self, a, b: False)
     general = S.SkeletalSet(a, None, R, e, 0.0, threshold=threshold)
-    assert compact._record_floats == 8 and general._record_floats == 16
+    assert compact._record_floats == 4 and general._record_floats == 16
     for x, y in zip(_dump(general, p, d), _dump(compact, p, d)):
         assert np.array_equal(x.view(np.uint32), y.view(np.uint32))
-    assert compact.nbytes() <= general.nbytes() - 32 * len(a)
+    assert compact.nbytes() <= general.nbytes() - 40 * len(a)  # 20 bytes a point, not 64
     if energy_sign < 0:
         # Balls touch about three quarters of their boxes' cells.
         assert compact.wide_len < 0.85 * general.wide_len

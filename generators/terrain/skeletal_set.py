@@ -86,15 +86,17 @@ import numpy as np
 
 from arches_render.field.lod import OctaveLOD
 from arches_render.field.node import Node, box_distance, opaque_float, refill
-from arches_render.field.noise import fbm, fbm_lipschitz
+from arches_render.field.noise import fbm_lipschitz
 from arches_render.field.brick_grid import BRICK, BrickLayout, list_entry
 from arches_render.field.primitive_set import empty_distance, grid_lists, unlisted_gaps
 
-from .falloff import G_SLOPE, g_dr
+from .falloff import G_SLOPE
 from .skeletal_bounds import (FAR, below_all, cell_tables, core_bound, distance_slopes, footprint_error, level_bound,
                               level_shape, local_slope, quiet_within, slant_cap, slanted_bound, stored_tables)
 from .skeletal_params import noise_params, primitive_arrays
-from .skeletal_records import POINT_RECORD, RECORD, gather_point, gather_primitive, pack_point_records, pack_records
+from .skeletal_records import (POINT_RECORD, RECORD, PointConstants, gather_point, gather_primitive,
+                               noise_free_constants, pack_point_records, pack_records)
+from .star_falloff import star_falloff
 from .support_distances import brick_centre_distances, centre_distances, centre_offsets
 
 #: Largest radius of the balls in which ``eval_local`` bounds slopes, in cell edges.
@@ -183,8 +185,11 @@ class SkeletalSet(Node):
         prim_slope = np.abs(e) * G_SLOPE * slopes  # |e_i| G_SLOPE L_i (module docstring)
         # Slope of the star distance d~ per primitive (module docstring, "Local slopes").
         span0 = self.noise["span"] if self.noise else 0.0
-        Dmin = np.ascontiguousarray(R * (1.0 - span0) * (1.0 - 1e-6), dtype=np.float32)
-        Ld = np.ascontiguousarray(slopes, dtype=np.float32) * np.float32(1.0 + 1e-6)
+        if self.noise:
+            Dmin = np.ascontiguousarray(R * (1.0 - span0) * (1.0 - 1e-6), dtype=np.float32)
+            Ld = np.ascontiguousarray(slopes, dtype=np.float32) * np.float32(1.0 + 1e-6)
+        else:  # as point records compute them (.skeletal_records)
+            Dmin, Ld = noise_free_constants(R)
         reach_R = seg = noise_K = None
         cell_l, cell_m, self._lipschitz, self.value_max, self.value_min = cell_tables(
             self, prim_slope, start, count, index)
@@ -262,10 +267,12 @@ class SkeletalSet(Node):
         self._near_reach = opaque_float(NEAR_REACH * cell)
 
         self._lists = self._compact_lists(start, count, index) if near is not None else self._wide
-        # Points without noise or curves: 32-byte records (.skeletal_records, "Point records").
-        self._record_floats = POINT_RECORD if points else RECORD
-        self._gather = gather_point if points else gather_primitive
-        self._records = (pack_point_records(a, R, c, e, Dmin, Ld) if points else
+        # Points without noise or curves, of one core: 16-byte records and their energies
+        # (.skeletal_records, "Point records").
+        point_records = points and n > 0 and bool(np.all(c == c[0]))
+        self._record_floats = POINT_RECORD if point_records else RECORD
+        self._points = PointConstants.of(e, float(c[0])) if point_records else None
+        self._records = (pack_point_records(a, R) if point_records else
                          pack_records(a, b, R, c, e, grp, reach_R, seg, noise_K, Dmin, Ld))
         self._glo_box = ([opaque_float(v) for v in self.grid_lo],
                          [opaque_float(v) for v in self.grid_lo + cell * res])
@@ -348,8 +355,14 @@ class SkeletalSet(Node):
         offsets, entries = self.layout.compact_lists(start, count, index, self._narrow)
         return tuple(mi.UInt32(v) for v in offsets), mi.UInt32(entries)
 
+    def _primitive(self, k):
+        """:class:`~.skeletal_records.Primitive` ``k`` (per lane), from the set's records."""
+        if self._points is not None:
+            return gather_point(self._records, self._points, k)
+        return gather_primitive(self._records, k)
+
     def _points_only(self, a, b):
-        """Whether the set holds points without noise or curves (32-byte records, and a
+        """Whether the set holds points without noise or curves (point records, and a
         carving set's lists by ball: :mod:`.skeletal_records`, ``__init__``)."""
         return not self.noise and not self.grouped and np.array_equal(a, b)
 
@@ -367,7 +380,7 @@ class SkeletalSet(Node):
 
     def nbytes(self):
         """Bytes of the arrays the set holds (records, lists, per-cell and per-brick data)."""
-        held = [self._records, *self._lists[0], self._lists[1], *self._wide[0], self._wide[1], self.layout._slots]
+        held = [self._records, self._points and self._points.energies, *self._lists[0], self._lists[1], *self._wide[0], self._wide[1], self.layout._slots]
         held += [getattr(self, k, None) for k in ("_cell_L", "_cell_M", "_empty", "_brick_empty", "_brick_centre",
                                                    "_unlisted")]
         unique = {id(a): a for a in held if a is not None}.values()
@@ -383,41 +396,6 @@ class SkeletalSet(Node):
         inside = ((fx >= 0) & (fy >= 0) & (fz >= 0) & (fx < rx) & (fy < ry) & (fz < rz))
         cell, stored, brick = self.layout.lookup(p)
         return cell, stored, brick, inside
-
-    def _falloff(self, p, prim, geometry=False, level=None, direction=None):
-        """``g(d~)`` of the primitive ``prim`` (a :class:`.skeletal_records.Primitive`) at
-        ``p`` (a value in [0, 1]); with ``geometry``, ``(g, rho, r, D)``: also
-        ``rho = max(r - c, 0)``, the distance ``r`` to the skeleton and the star radius
-        ``D(p)`` (``D_max`` where the noise is skipped), and with a ``direction`` ``u``
-        the lean ``grad r . u`` (signed) after them. ``level``: the star noise's
-        footprint level (``None``: every octave)."""
-        a, ba, R, core = prim.a, prim.ba, prim.R, prim.core
-        pa = p - a
-        t = dr.clip(dr.dot(pa, ba) * prim.inv_len2, 0.0, 1.0)
-        s = a + ba * t
-        off = p - s
-        r = dr.norm(off)
-        rho = dr.maximum(r - core, 0.0)
-        lean = () if direction is None else (dr.dot(off, direction) * dr.rcp(dr.maximum(r, 1e-30)),)
-        if not self.noise:
-            g = g_dr(dr.square(rho / R))
-            return (g, rho, r, R, *lean) if geometry else g
-
-        def noisy(rho, R, core, s, off, r, group, *lvl):
-            u = off / dr.maximum(r, 1e-12)
-            v = s + (core + R) * u
-            seed = self._seed + group * 7919
-            n = fbm(v * self._inv_wl, int(self.noise["octaves"]), self._lac, self._gain, seed, *lvl)
-            D = R * (1.0 + self._amp * n)
-            return g_dr(dr.square(rho / D)), D
-
-        def far(rho, R, core, s, off, r, group, *lvl):
-            return mi.Float(0.0), R * self._reach
-
-        lvl = () if level is None else (level,)
-        g, D = dr.if_stmt((rho, R, core, s, off, r, prim.group, *lvl), rho < R * self._reach, noisy, far,
-                          label="star_noise")
-        return (g, rho, r, D, *lean) if geometry else g
 
     def field(self, p):
         """Combined field ``F(p)`` (before the threshold) as ``mi.Float``."""
@@ -456,8 +434,8 @@ class SkeletalSet(Node):
             """``(e, g, ds, slopes)`` of the primitive ``prim``."""
             e = prim.e
             if not n_u and not radii:
-                return e, self._falloff(p, prim, level=level), ds, ()
-            geometry = self._falloff(p, prim, True, level, along)
+                return e, star_falloff(self, p, prim, level=level), ds, ()
+            geometry = star_falloff(self, p, prim, True, level, along)
             out = []
             for u, d, shape in zip(us, ds, shapes):
                 if carving:
@@ -474,7 +452,7 @@ class SkeletalSet(Node):
         zeros = tuple(mi.Float(0.0) for _ in radii)
         if self.combine == "max" or not self.grouped:
             def body(i, acc, *rest):
-                prim = self._gather(self._records, list_entry(index_a, start + i, self._narrow))
+                prim = self._primitive(list_entry(index_a, start + i, self._narrow))
                 e, gk, ds, sl = visit(prim, rest[:n_u])
                 v = e * gk
                 # Union (max): one primitive at a time sets the slope; sum: they add.
@@ -487,7 +465,7 @@ class SkeletalSet(Node):
             return acc, rest[:n_u], rest[n_u:]
 
         def body_g(i, acc, cur_g, best, cur_e, *rest):
-            prim = self._gather(self._records, list_entry(index_a, start + i, self._narrow))
+            prim = self._primitive(list_entry(index_a, start + i, self._narrow))
             grp = prim.group
             e, gk, ds, sl = visit(prim, rest[:n_u])
             new = grp != cur_g
