@@ -73,6 +73,7 @@ from ..backend import variant_class
 from .aovs import DEPTH_CHANNEL, MOMENT_CHANNELS, RAY_COUNT_KINDS, aov_channel_names, primary_aovs, second_moments
 from .heightfield_caster import make_tracer
 from .march import position_ulps
+from .path_state import PathState
 from .shading_normals import facing_shading_frame
 
 __all__ = ["ImplicitPathIntegrator", "mis_weight", "register"]
@@ -102,7 +103,9 @@ class _ImplicitPathImpl:
     spread a non-delta bounce adds), ``surface_cells`` (false: trace fields that no
     heightfield cast answers through surface cells, :mod:`.cell_tracer`), ``sun_columns``
     (false: shadow rays towards the sun end where a map in its frame proves the rest
-    free, :mod:`.sun_columns`).
+    free, :mod:`.sun_columns`), ``wavefront`` (false: the path loop depth by depth over
+    compacted live paths, sphere-traced queries by persistent lanes; the same picture,
+    :mod:`.wavefront`).
     """
 
     def __init__(self, props):
@@ -121,6 +124,7 @@ class _ImplicitPathImpl:
         self.lod_bounce_spread = float(props.get("lod_bounce_spread", 0.1))
         self.surface_cells = bool(props.get("surface_cells", False))
         self.sun_columns = bool(props.get("sun_columns", False))
+        self.wavefront = bool(props.get("wavefront", False))
         self.tracer = None
         self.field_bsdf = None
         self.shaded_bsdf = None
@@ -137,6 +141,8 @@ class _ImplicitPathImpl:
                                   cast=self.heightfield_cast, cells=self.surface_cells)
         if sun is not None and self.sun_columns and hasattr(self.tracer, "aim_at_sun"):
             self.tracer.aim_at_sun(*sun)
+        if self.wavefront and hasattr(self.tracer, "queued"):
+            self.tracer.queued = True
         self.field_bsdf = bsdf
         self.shaded_bsdf = bsdf
 
@@ -285,71 +291,74 @@ class _ImplicitPathImpl:
         return dr.select(field_hit, mi.BSDFPtr(self.field_bsdf), si.bsdf(ray))
 
     # -- estimator ---------------------------------------------------------------
-    @dr.syntax
     def sample(self, scene, sampler, ray, medium=None, active=True):
-        """One path per lane (module docstring): ``(L, valid, aovs)``. The optional
-        parts of the state (fog-free path, cone, AOVs, ray counts) are empty tuples
-        when off, so that their code is not traced."""
+        """One path per lane (module docstring): ``(L, valid, aovs)``, in Mitsuba's
+        megakernel or, with ``wavefront``, depth by depth (:mod:`.wavefront`)."""
+        if self.wavefront:
+            from .wavefront import wavefront_sample
+            return wavefront_sample(self, scene, sampler, ray, active)
+        return self.sample_megakernel(scene, sampler, ray, active)
+
+    def start_paths(self, sampler, ray, active, width=None):
+        """The :class:`~.path_state.PathState` of paths about to trace camera rays ``ray``
+        (``width``: as :meth:`.PathState.start`)."""
+        aov = self.primary_aov_count() if self.aovs else 0
+        return PathState.start(mi.Ray3f(ray), active, self.camera_cone(sampler, ray) or (),
+                               self.atmosphere is not None and self.aovs, aov,
+                               2 * len(RAY_COUNT_KINDS) if aov and self.tracer else 0, width)
+
+    @dr.syntax
+    def sample_megakernel(self, scene, sampler, ray, active=True):
+        """:meth:`sample` as one symbolic loop over :meth:`path_vertex`."""
         ctx = mi.BSDFContext()
-        ray = mi.Ray3f(ray)
-        L = mi.Spectrum(0.0)
-        beta = mi.Spectrum(1.0)
-        eta = mi.Float(1.0)
-        depth = mi.UInt32(0)
-        active = mi.Bool(active)
-        valid_ray = mi.Bool(False)
-        prev_si = dr.zeros(mi.SurfaceInteraction3f)
-        prev_bsdf_pdf = mi.Float(1.0)
-        prev_bsdf_delta = mi.Bool(True)
-        cone = self.camera_cone(sampler, ray) or ()
-        # The fog-free radiance and throughput of the same path (AOV beauty_clear).
-        clear = (mi.Spectrum(0.0), mi.Spectrum(1.0)) if self.atmosphere is not None and self.aovs else ()
-        # AOVs of the first vertex (primary hit), recorded in the loop.
-        aov = tuple(mi.Float(0.0) for _ in range(self.primary_aov_count())) if self.aovs else ()
-        # Rays of the path that exhausted / were unresolved, by kind (AOVs too).
-        counts = tuple(mi.Float(0.0) for _ in range(2 * len(RAY_COUNT_KINDS))) if aov and self.tracer else ()
+        path = self.start_paths(sampler, ray, active)
+        while dr.hint(path.active, label="implicit_path"):
+            path = self.path_vertex(scene, sampler, ctx, path)
+        return path.L, path.valid, self.outputs(path.L, path.aov, path.clear, path.counts)
 
-        while dr.hint(active, label="implicit_path"):
-            primary = depth == 0  # lanes whose ray left the camera (a miss ends a path)
-            si, field_hit, res = self.intersect(scene, ray, active, cone or None)
-            # The cone at the hit: shadow rays keep its spread, bounces widen it.
-            hit_cone = (cone[0] + cone[1] * dr.select(si.is_valid(), si.t, 0.0), cone[1]) if cone else ()
-            L, beta, clear, tr = self.fog_segment(ray, si, L, beta, clear, active)
-            bsdf = self.bsdf_at(si, ray, field_hit)
-            # The field's material shaded once per vertex (on the field and on meshes that
-            # carry it), for the AOVs, the light sample and the BSDF sample alike; its
-            # cavity term at the camera ray's hit.
-            shaded = self.shaded_lanes(bsdf, field_hit)
-            shading = self.shade_vertex(si, shaded, active & (primary | (depth + 1 < self.max_depth)), primary,
-                                        hit_cone)
-            aov = self.record_aovs(scene, ray, si, field_hit, res, tr, active & primary, aov, shading, shaded)
-            counts = count_rays(counts, (res, res), (active & primary, active & ~primary), (0, 1))
+    def path_vertex(self, scene, sampler, ctx, path):
+        """One vertex of the paths ``path`` (a :class:`~.path_state.PathState`): the ray's
+        hit, its fog, emission reached by BSDF sampling, next-event estimation, the BSDF
+        sample and Russian roulette; the state after it."""
+        ray, cone, active, depth = path.ray, path.cone, path.active, path.depth
+        L, beta, clear, aov, counts = path.L, path.beta, path.clear, path.aov, path.counts
+        primary = depth == 0  # lanes whose ray left the camera (a miss ends a path)
+        si, field_hit, res = self.intersect(scene, ray, active, cone or None)
+        # The cone at the hit: shadow rays keep its spread, bounces widen it.
+        hit_cone = (cone[0] + cone[1] * dr.select(si.is_valid(), si.t, 0.0), cone[1]) if cone else ()
+        L, beta, clear, tr = self.fog_segment(ray, si, L, beta, clear, active)
+        bsdf = self.bsdf_at(si, ray, field_hit)
+        # The field's material shaded once per vertex (on the field and on meshes that
+        # carry it), for the AOVs, the light sample and the BSDF sample alike; its
+        # cavity term at the camera ray's hit.
+        shaded = self.shaded_lanes(bsdf, field_hit)
+        shading = self.shade_vertex(si, shaded, active & (primary | (depth + 1 < self.max_depth)), primary,
+                                    hit_cone)
+        aov = self.record_aovs(scene, ray, si, field_hit, res, tr, active & primary, aov, shading, shaded)
+        counts = count_rays(counts, (res, res), (active & primary, active & ~primary), (0, 1))
 
-            # Emission reached by BSDF sampling (environment or area light), MIS-weighted.
-            L, clear = self.emission_hit(scene, si, prev_si, prev_bsdf_pdf, prev_bsdf_delta, depth == 0, L, beta,
-                                         clear, active)
+        # Emission reached by BSDF sampling (environment or area light), MIS-weighted.
+        L, clear = self.emission_hit(scene, si, path.prev_si, path.prev_bsdf_pdf, path.prev_bsdf_delta, depth == 0,
+                                     L, beta, clear, active)
 
-            active_next = active & si.is_valid() & (depth + 1 < self.max_depth)
-            L, clear, counts = self.next_event(scene, sampler, si, bsdf, shading, shaded, hit_cone, ctx, L, beta,
-                                               clear, counts, active_next)
+        active_next = active & si.is_valid() & (depth + 1 < self.max_depth)
+        L, clear, counts = self.next_event(scene, sampler, si, bsdf, shading, shaded, hit_cone, ctx, L, beta,
+                                           clear, counts, active_next)
 
-            # BSDF sampling.
-            bs, bsdf_weight = self.sample_bsdf(bsdf, shading, shaded, ctx, si, sampler.next_1d(),
-                                               sampler.next_2d(), active_next)
-            valid_ray |= active & si.is_valid()
-            ray = si.spawn_ray(si.to_world(bs.wo))
-            beta *= bsdf_weight
-            clear = (clear[0], clear[1] * bsdf_weight) if clear else ()
-            eta *= bs.eta
-            prev_si = dr.detach(si)
-            prev_bsdf_pdf = bs.pdf
-            prev_bsdf_delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
-            cone = (hit_cone[0], hit_cone[1] + dr.select(prev_bsdf_delta, 0.0, self.lod_bounce_spread)) if cone else ()
-            depth[si.is_valid()] += 1
-
-            beta, clear, active = self.roulette(sampler, beta, clear, eta, depth, active_next)
-
-        return L, valid_ray, self.outputs(L, aov, clear, counts)
+        # BSDF sampling.
+        bs, bsdf_weight = self.sample_bsdf(bsdf, shading, shaded, ctx, si, sampler.next_1d(),
+                                           sampler.next_2d(), active_next)
+        valid = path.valid | (active & si.is_valid())
+        beta = beta * bsdf_weight
+        clear = (clear[0], clear[1] * bsdf_weight) if clear else ()
+        delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
+        cone = (hit_cone[0], hit_cone[1] + dr.select(delta, 0.0, self.lod_bounce_spread)) if cone else ()
+        depth = dr.select(si.is_valid(), depth + 1, depth)
+        eta = path.eta * bs.eta
+        beta, clear, active = self.roulette(sampler, beta, clear, eta, depth, active_next)
+        return PathState(ray=si.spawn_ray(si.to_world(bs.wo)), L=L, beta=beta, eta=eta, depth=depth,
+                         active=active, valid=valid, prev_si=dr.detach(si), prev_bsdf_pdf=bs.pdf,
+                         prev_bsdf_delta=delta, cone=cone, clear=clear, aov=aov, counts=counts)
 
     # -- the parts of a path vertex ----------------------------------------------
     def fog_segment(self, ray, si, L, beta, clear, active):

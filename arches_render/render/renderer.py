@@ -35,6 +35,7 @@ from .atmosphere import Atmosphere
 from .mesh_region import scene_mesh_region
 from .plugins import ensure_registered
 from .sun_columns import scene_sun
+from .wavefront import WAVEFRONT_LANES
 
 PASS_SPP = 16
 MAX_PASSES = 4096
@@ -347,8 +348,8 @@ def integrator_dict(desc, geometry, field_bsdf=None, aovs=False, moments=False) 
         return d
     return {"type": "implicit_path", "max_depth": s.max_depth, "rr_depth": s.rr_depth,
             "eps": s.eps, "omega": s.omega, "max_steps": s.max_steps,
-            "surface_cells": s.surface_cells, "sun_columns": s.sun_columns, "lod": s.lod, "aovs": bool(aovs),
-            "moments": bool(moments)}
+            "surface_cells": s.surface_cells, "sun_columns": s.sun_columns, "wavefront": s.wavefront, "lod": s.lod,
+            "aovs": bool(aovs), "moments": bool(moments)}
 
 
 def attach_field(integrator, desc, geometry, field_bsdf) -> None:
@@ -428,12 +429,25 @@ def attach_atmosphere(scene, desc, integrator=None) -> None:
     (integrator or scene.integrator()).attach_atmosphere(Atmosphere.for_scene(settings, desc.lights, (lo, hi)))
 
 
-def plan_passes(spp: int, passes: int = 0) -> list[int]:
-    """Split ``spp`` into passes of nearly equal size (``passes = 0``: about 16 spp each)."""
+def plan_passes(spp: int, passes: int = 0, most: int = 0) -> list[int]:
+    """Split ``spp`` into passes of nearly equal size (``passes = 0``: about 16 spp each),
+    of at most ``most`` spp each when ``most`` is given."""
     n = passes or math.ceil(spp / PASS_SPP)
+    if most:
+        n = max(n, math.ceil(spp / most))
     n = max(1, min(n, spp, MAX_PASSES))
     base, extra = divmod(spp, n)
     return [base + (1 if i < extra else 0) for i in range(n)]
+
+
+def pass_limit(scene, integrator=None) -> int:
+    """The most spp a pass may take (0: no limit): a wavefront integrator keeps its paths'
+    state in memory, ``WAVEFRONT_LANES`` paths a pass at most (:mod:`.wavefront`)."""
+    integ = integrator or scene.integrator()
+    if not getattr(integ, "wavefront", False):
+        return 0
+    width, height = scene.sensors()[0].film().crop_size()
+    return max(1, WAVEFRONT_LANES // (int(width) * int(height)))
 
 
 def pass_seed(seed: int, i: int, stream: int = 0) -> int:
@@ -474,7 +488,7 @@ def render_layers(scene, spp: int, seed: int = 0, passes: int = 0, progress=None
     """
     names = list((integrator or scene.integrator()).aov_names())
     acc, done = None, 0
-    for i, n in enumerate(plan_passes(spp, passes)):
+    for i, n in enumerate(plan_passes(spp, passes, pass_limit(scene, integrator))):
         img = mi.render(scene, spp=n, seed=pass_seed(seed, i, stream), integrator=integrator)
         img = img.numpy().astype(np.float64)
         acc = img * n if acc is None else acc + img * n
@@ -506,7 +520,7 @@ def render_image(scene, spp: int, seed: int = 0, passes: int = 0, progress=None)
     numpy.ndarray
         ``(H, W, 3)`` float32 linear Rec.709 radiance.
     """
-    plan = plan_passes(spp, passes)
+    plan = plan_passes(spp, passes, pass_limit(scene))
     acc = None
     done = 0
     for i, n in enumerate(plan):

@@ -35,6 +35,7 @@ from ..field.lod import Footprint
 from ..field.node import finite_box, one_sided, shading_normals
 from .march import (SECOND_PASS_FACTOR, March, ShadowProbe, march_result, position_ulps, ray_box, relaxed_step,
                     secant_probe)
+from .ray_queue import queued_march
 from .sun_columns import SUN_HALF_ANGLE, SunColumns
 
 #: Fraction of the cone's radius that a hit may stay in front of the surface. At a
@@ -84,6 +85,9 @@ class SphereTracer:
         self.omega = float(omega)
         self.max_steps = int(max_steps)
         self.sun = None
+        #: March by persistent lanes (:mod:`.ray_queue`): queries must then come with
+        #: their rays evaluable (not from inside a symbolic loop).
+        self.queued = False
 
     def aim_at_sun(self, direction, half_angle=SUN_HALF_ANGLE):
         """Build the :class:`~.sun_columns.SunColumns` of this field for a sun towards
@@ -140,14 +144,15 @@ class SphereTracer:
         t_in, t_out = ray_box(o, d, self.lo_op, self.hi_op)
         t_start = dr.maximum(t_in, 0.0)
         t_end = dr.minimum(t_out, tmax)
+        march = self._queued if self.queued else self._march
         if not (any_hit and self.sun is not None):
             active = mi.Bool(active) & (t_start <= t_end)
-            return self._march(mi.Point3f(o), mi.Vector3f(d), t_start, t_end, active, cone, any_hit)
+            return march(mi.Point3f(o), mi.Vector3f(d), t_start, t_end, active, cone, any_hit)
         t_cap, rock = self.sun.limits(o, d, tmax)
         rock &= mi.Bool(active) & (t_start <= t_end)
         t_end = dr.minimum(t_end, t_cap)
         active = mi.Bool(active) & ~rock & (t_start <= t_end)
-        res = self._march(mi.Point3f(o), mi.Vector3f(d), t_start, t_end, active, cone, any_hit)
+        res = march(mi.Point3f(o), mi.Vector3f(d), t_start, t_end, active, cone, any_hit)
         res.hit |= rock
         res.t = dr.select(rock, t_start, res.t)
         return res
@@ -175,6 +180,10 @@ class SphereTracer:
             alive &= ~(out.hit | out.done | out.invalid)
             steps += 1
         return march_result(march, hit, alive, invalid, steps, active, self.max_steps)
+
+    def _queued(self, o, d, t_start, t_end, active, cone, any_hit=False):
+        """:meth:`_march` by persistent lanes (:func:`.ray_queue.queued_march`)."""
+        return queued_march(self, o, d, t_start, t_end, active, cone, any_hit)
 
     def step(self, o, d, march, t_end, cone=None, shadow=None):
         """One over-relaxed sphere step of the rays ``o + t d`` from ``march.t``

@@ -19,7 +19,10 @@ A scene file is data, never code. Top-level tables:
                  empty space jumped over, rock seen ahead by shadow rays; default
                  false), ``sun_columns`` (shadow rays towards the sun end where a
                  map in its frame proves the rest free,
-                 :mod:`arches_render.render.sun_columns`; default false), ``lod``
+                 :mod:`arches_render.render.sun_columns`; default false), ``wavefront``
+                 (paths traced depth by depth, field queries by persistent lanes:
+                 :mod:`arches_render.render.wavefront`; the same picture, faster on
+                 costly fields, slower on cheap ones; default false), ``lod``
                  (footprint level of detail: octaves finer than a ray's cone skipped, :mod:`arches_render.field.lod`; default true;
                  false renders full detail, e.g. a heavily displaced rim against
                  the sky, whose coverage level of detail thins)
@@ -120,6 +123,7 @@ class RenderSettings:
     max_steps: int = 512
     surface_cells: bool = False
     sun_columns: bool = False
+    wavefront: bool = False
     lod: bool = True
 
 
@@ -458,6 +462,7 @@ def parse_scene(data: dict, path) -> SceneDescription:
         max_steps=r.integer("max_steps", 512, lo=16, hi=1 << 16),
         surface_cells=r.boolean("surface_cells", False),
         sun_columns=r.boolean("sun_columns", False),
+        wavefront=r.boolean("wavefront", False),
         lod=r.boolean("lod", True))
     if settings.max_depth == 0:
         raise r.error("max_depth", "must be -1 (unbounded) or an integer in [1, 1024] (got 0)")
