@@ -56,6 +56,16 @@
                       renderer's settings otherwise). Value: the median of the per-scene
                       time ratios (cover over sphere); baseline: 1 (below pays). Extra
                       fields: per-scene ratios, the cover's build seconds and triangles.
+``render_wavefront_vs_megakernel``  (issue 32) the integrator's wavefront
+                      (``[render] wavefront``: paths depth by depth, queries by
+                      persistent lanes, ``arches_render.render.wavefront``) against its
+                      megakernel, field renders of ``fig23_goblins``,
+                      ``fig23_arch_bridge``, ``fig23_coastal_cliff``, ``fig17_karst`` and
+                      ``fig21_floating_islands`` from every camera (160x90, 8 spp, warm,
+                      whatever the scene asks). Value: the median of the per-scene time
+                      ratios (wavefront over megakernel); baseline: 1 (below pays).
+                      Extra fields: per-scene ratios (the choice a scene makes, and
+                      whether it would pay on a GPU: ``benchmarks/device_check.sh``).
 ``render_landscape_end_to_end``  (issue 32) per landscape (the gallery and the real
                       DEMs), the field path (scene build: the tracer's structures
                       included, plus the render) over the mesh path (polygonization at
@@ -337,6 +347,32 @@ def bench_render_cover_vs_sphere(repeat):
                 load=round(0.5 * (load0 + os.getloadavg()[0]), 2))
 
 
+def bench_render_wavefront_vs_megakernel(repeat):
+    from arches_render.render.jobs import set_camera
+    from arches_render.render.renderer import build_scene
+    from arches_render.scene import load_scene
+    from arches_render.timing import REPO, median_renders
+    w, h, spp = 160, 90, 8
+    load0 = os.getloadavg()[0]
+    ratios = {}
+    for name in ("fig23_goblins", "fig23_arch_bridge", "fig23_coastal_cliff", "fig17_karst",
+                 "fig21_floating_islands"):
+        desc = load_scene(REPO / "scenes" / "gallery" / f"{name}.toml")
+        scenes = []
+        for wavefront in (False, True):
+            desc.render.wavefront = wavefront
+            scenes.append(build_scene(desc, "field", w, h))
+        tm = tw = 0.0
+        for cam in desc.cameras.values():
+            for scene in scenes:
+                set_camera(scene, cam.origin, cam.target, cam.up, cam.fov)
+            a, b = median_renders(scenes, spp, repeat, warm_spp=spp)
+            tm, tw = tm + a, tw + b
+        ratios[name] = round(tw / tm, 3)
+    return dict(value=statistics.median(ratios.values()), unit="x", baseline=1.0, baseline_is="break-even",
+                per_scene=ratios, resolution=f"{w}x{h}", spp=spp, load=round(0.5 * (load0 + os.getloadavg()[0]), 2))
+
+
 def bench_render_landscape_end_to_end(repeat):
     import tempfile
 
@@ -376,5 +412,6 @@ BENCHMARKS = {
     "trace_steps_by_ray_type": (bench_trace_steps_by_ray_type, 1),
     "render_field_vs_sdfgrid": (bench_render_field_vs_sdfgrid, 3),
     "render_cover_vs_sphere": (bench_render_cover_vs_sphere, 3),
+    "render_wavefront_vs_megakernel": (bench_render_wavefront_vs_megakernel, 3),
     "render_landscape_end_to_end": (bench_render_landscape_end_to_end, 1),
 }

@@ -66,6 +66,8 @@ run() {
     timeout 150 python3 -m pytest -p no:cacheprovider -p no:benchmark -n 16 -v --tb=line tests/test_tracer_holes.py \
         tests/test_tracer_budget.py tests/test_heightfield_caster.py tests/test_golden_scenes.py 2>&1 \
         | grep -E "PASSED|FAILED|ERROR|^E " | tail -80
+    step "wavefront against megakernel (160x90, 8 spp): on a GPU the wavefront may pay everywhere"
+    timeout 150 python3 benchmarks/run.py --json render_wavefront_vs_megakernel | tee "$OUT/bench_wavefront.json"
     step "landscape benchmark, gallery scenes (160x90, 8 spp)"
     ARCHES_BENCH_LANDSCAPE_SCENES=$(ls scenes/gallery/*.toml | xargs -n1 basename | sed 's/\.toml$//' | paste -sd,) \
         ARCHES_BENCH_LANDSCAPE=160x90,8 timeout "$landscape_s" python3 benchmarks/run.py --json \
