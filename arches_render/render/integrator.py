@@ -342,12 +342,13 @@ class _ImplicitPathImpl:
                                      L, beta, clear, active)
 
         active_next = active & si.is_valid() & (depth + 1 < self.max_depth)
-        L, clear, counts = self.next_event(scene, sampler, si, bsdf, shading, shaded, hit_cone, ctx, L, beta,
-                                           clear, counts, active_next)
-
-        # BSDF sampling.
+        # Next-event estimation and the BSDF sample, then the shadow rays: the vertex's
+        # shading is not needed past them (:meth:`light_sample`).
+        shadow, lanes, added, added_clear = self.light_sample(scene, sampler, si, bsdf, shading, shaded, ctx, beta,
+                                                              clear, active_next)
         bs, bsdf_weight = self.sample_bsdf(bsdf, shading, shaded, ctx, si, sampler.next_1d(),
                                            sampler.next_2d(), active_next)
+        L, clear, counts = self.shadow_test(scene, shadow, lanes, added, added_clear, hit_cone, L, clear, counts)
         valid = path.valid | (active & si.is_valid())
         beta = beta * bsdf_weight
         clear = (clear[0], clear[1] * bsdf_weight) if clear else ()
@@ -416,10 +417,12 @@ class _ImplicitPathImpl:
             clear = (dr.select(visible, clear[0] + clear[1] * w * Le, clear[0]), clear[1])
         return L, clear
 
-    def next_event(self, scene, sampler, si, bsdf, shading, shaded, hit_cone, ctx, L, beta, clear, counts,
-                   active):
-        """``(L, clear, counts)`` after next-event estimation at ``si``: one emitter
-        sample, its shadow ray (meshes and field) and the MIS-weighted contribution.
+    def light_sample(self, scene, sampler, si, bsdf, shading, shaded, ctx, beta, clear, active):
+        """Next-event estimation at ``si`` before its shadow ray: ``(shadow, lanes, added,
+        added_clear)``, one emitter sample's shadow ray, the lanes that trace it, and the
+        MIS-weighted radiance it adds (to ``L`` and to the fog-free path's) where that ray
+        is free. Why before: the shadow query then splits nothing a wavefront must keep
+        in memory across it but these (:mod:`.wavefront`).
 
         A BSDF that reflects on its front side only (no transmission, no back side:
         Mitsuba's ``diffuse``, the ``triplanar`` material) is 0 unless both directions
@@ -434,16 +437,22 @@ class _ImplicitPathImpl:
         active_em &= ~front_only | ((mi.Frame3f.cos_theta(si.wi) > 0.0) & (mi.Frame3f.cos_theta(wo) > 0.0))
         shadow = si.spawn_ray_to(ds.p)
         shadow.maxt = dr.select(ds.delta | (ds.dist < dr.inf), shadow.maxt, dr.inf)
-        blocked, res = self.occluded(scene, shadow, active_em, hit_cone or None)
-        counts = count_rays(counts, (res,), (active_em,), (2,))
-        active_em &= ~blocked
         bsdf_val, bsdf_pdf = self.eval_pdf(bsdf, shading, shaded, ctx, si, wo, active_em)
         mis = dr.select(ds.delta, 1.0, mis_weight(ds.pdf, bsdf_pdf))
-        if clear:
-            clear = (dr.select(active_em, clear[0] + clear[1] * mis * bsdf_val * em_weight, clear[0]), clear[1])
+        added_clear = clear[1] * mis * bsdf_val * em_weight if clear else None
         if self.atmosphere is not None:
             em_weight = em_weight * self.atmosphere.shadow_transmittance(si, ds)
-        return dr.select(active_em, L + beta * mis * bsdf_val * em_weight, L), clear, counts
+        return shadow, active_em, beta * mis * bsdf_val * em_weight, added_clear
+
+    def shadow_test(self, scene, shadow, lanes, added, added_clear, hit_cone, L, clear, counts):
+        """``(L, clear, counts)`` after the shadow rays of :meth:`light_sample`: its
+        radiance added where they are free, their exhausted and unresolved lanes counted."""
+        blocked, res = self.occluded(scene, shadow, lanes, hit_cone or None)
+        counts = count_rays(counts, (res,), (lanes,), (2,))
+        lit = lanes & ~blocked
+        if clear:
+            clear = (dr.select(lit, clear[0] + added_clear, clear[0]), clear[1])
+        return dr.select(lit, L + added, L), clear, counts
 
     def roulette(self, sampler, beta, clear, eta, depth, active):
         """Russian roulette from ``rr_depth``, continuation probability
