@@ -50,6 +50,16 @@ Scene table (``[[far_field]]``, one per heightfield)::
     reach = 1e10                # optional, metres from the border
     sea_level = 0.0             # optional: a sea ring at this level ...
     water_material = "water"    # ... in this material (required with sea_level)
+    context = { file = "data/t.context.npy", extent = [x0, y0, x1, y1] }
+                                # optional: the DEM the tile was refined from
+                                # (:mod:`.refined_crop`), in the tile's frame
+
+Context
+    A tile refined from a window of a coarser DEM (``amplify --refine``) lies inside
+    that DEM: the rings then read the DEM around it (continued past its own border as
+    above) instead of continuing the tile's relief, and the overview shows the real
+    terrain around the crop. The crop meets the DEM's bilinear surface at its border,
+    which is what the first rings read.
 """
 
 from __future__ import annotations
@@ -212,7 +222,7 @@ def frame_band(node) -> tuple[int, int]:
             min(int(math.ceil(R / dy - 1e-9)) + 1, (ny - 1) // 2))
 
 
-def far_field_mesh(node, reach=None, sea_level=None):
+def far_field_mesh(node, reach=None, sea_level=None, context=None):
     """Ground mesh of the far field of a heightfield node (see the module docstring).
 
     Parameters
@@ -224,6 +234,9 @@ def far_field_mesh(node, reach=None, sea_level=None):
     sea_level : float, optional
         The sea's level: the ground past a sea border stays under it and past a land
         border above it (:class:`.ContinuedRelief`, "Coasts").
+    context : (numpy.ndarray, tuple), optional
+        ``(heights, extent)`` of a DEM holding the tile (module docstring, "Context"):
+        the rings read it instead of the tile's continuation.
 
     Returns
     -------
@@ -267,8 +280,13 @@ def far_field_mesh(node, reach=None, sea_level=None):
     off = sum(len(v) for v in V[:-1])
     prev = [(off + k, t) for k, t in _loop_sides(corners, len(loop))]
     off += len(loop)
-    relief = ContinuedRelief(H, node.extent, sea_level)
-    sigma = blur_schedule(relief, max(dx, dy))
+    if context is None:
+        relief = ContinuedRelief(H, node.extent, sea_level)
+        sigma = blur_schedule(relief, max(dx, dy))
+    else:
+        C, (cx0, cy0, cx1, cy1) = np.asarray(context[0], np.float64), context[1]
+        relief = ContinuedRelief(C, (cx0, cy0, cx1, cy1), sea_level)
+        sigma = blur_schedule(relief, max((cx1 - cx0) / (C.shape[1] - 1), (cy1 - cy0) / (C.shape[0] - 1)))
     for sk in ring_distances(max(dx, dy), reach, 1.0 + 0.7 / DETAIL)[1:]:
         lo, hi = (x0 - sk, y0 - sk), (x1 + sk, y1 + sk)
         # Along a ring: at least a cell, at most MAX_RING points (then blurred as sampled),
@@ -376,6 +394,7 @@ class FarField:
     reach: float
     sea_level: float | None = None
     water_material: str | None = None
+    context: tuple | None = None
     _meshes: list | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
@@ -386,7 +405,7 @@ class FarField:
     def meshes(self) -> list:
         """``[(material, TriangleMesh)]``: the ground, then the sea ring if any (built once)."""
         if self._meshes is None:
-            out = [(self.material, far_field_mesh(self.node, self.reach, self.sea_level))]
+            out = [(self.material, far_field_mesh(self.node, self.reach, self.sea_level, self.context))]
             if self.sea_level is not None:
                 out.append((self.water_material, sea_ring_mesh(self.node.extent, self.sea_level, self.reach)))
             self._meshes = out
@@ -427,5 +446,24 @@ def parse_far_field(t, builder, field_node, materials: dict, scene_file, index: 
         water = t.string("water_material")
         if water not in materials:
             raise t.error("water_material", f"unknown material '{water}' (defined: {', '.join(sorted(materials))})")
+    context = _context(t, node, scene_file)
     t.finish()
-    return FarField(index, node, mat, float(reach), sea, water)
+    return FarField(index, node, mat, float(reach), sea, water, context)
+
+
+def _context(t, node, scene_file):
+    """``(heights, extent)`` of the table's optional ``context`` (module docstring), which
+    must hold the node's tile."""
+    ct = t.table("context", None)
+    if ct is None:
+        return None
+    from pathlib import Path
+
+    from arches_render.scene.nodes import load_heights
+    x0, y0, x1, y1 = ct.vector("extent", 4)
+    tx0, ty0, tx1, ty1 = node.extent
+    if not (x0 <= tx0 and y0 <= ty0 and x1 >= tx1 and y1 >= ty1):
+        raise ct.error("extent", f"must hold the tile {[tx0, ty0, tx1, ty1]} (got {[x0, y0, x1, y1]})")
+    H = load_heights(ct, Path(scene_file).parent)
+    ct.finish()
+    return np.asarray(H, np.float64), (float(x0), float(y0), float(x1), float(y1))

@@ -1,0 +1,263 @@
+"""A refined crop of a coarse DEM: landforms carved in metres, not at the cell's size (issue 34).
+
+On a DEM of 100 m cells or coarser every landform process works at the cell's scale:
+the falloff radius, the primitives' spacing and the cliffs' heights all follow the
+cell (a 2.4 km coastal DEM was carved into sea-erosion bowls kilometres wide). The
+paper amplifies terrains whose landforms are metres to tens of metres (Paris et al.
+2019, Sec. 8); it does not say what to do with a DEM that cannot resolve them. We
+bring the surface down to the landforms' scale first, on a window of the DEM:
+
+Window
+    A square of ``side`` cells, at least :data:`CROP_WIDTH_M` metres and
+    :data:`CROP_CELLS` cells wide (the whole DEM's shorter side at most), where the
+    relief (highest less lowest sample in it) is largest: mountains and escarpments
+    rather than plains (:func:`crop_window`). With a sea, windows holding both sea and
+    land (a share of sea between :data:`COAST_SHARE`) come first, so that a coast
+    has its shore in the crop.
+Surface
+    The window resampled at ``side * cell / cells`` metres by a cubic B-spline
+    (C2, through the samples), plus fBm octaves that continue the DEM's own spectrum
+    from its Nyquist wavelength (two cells) down to four fine cells
+    (:func:`.detail.detail_amplification`'s fit of the whole DEM, the same noise the
+    renderer adds below a cell), so that the processes find relief between the
+    samples and not a smooth spline. The fBm fades out below the sea level (it would
+    put islands and pools along the shore), and both the fBm and the spline's departure
+    from the bilinear surface fade out over the border's :data:`TAPER` of the crop: at
+    its edge the crop is the DEM's bilinear surface, which is what the far field reads
+    there (``[[far_field]]``'s ``context``, :mod:`.far_field`), so that the crop sits
+    in its DEM without a step.
+Context
+    The whole DEM, placed in the crop's frame (the crop centred on the origin, as
+    :func:`.amplify.amplify` centres its tiles): the far field continues the crop with
+    the real terrain around it, not with a copy of the crop's own relief.
+
+A DEM whose sea is SRTM's flat sheet gets its floor laid first
+(:func:`.sea_floor.lay_sea_floor`), as amplify does, so the spline does not ring
+along the coast of a flat sheet.
+
+References
+----------
+Paris, A., Galin, E., Peytavie, A., Guérin, E., Gain, J. (2019). Terrain
+amplification with implicit 3D features. ACM TOG 38(5), Sec. 8.
+Unser, M. (1999). Splines: a perfect fit for signal and image processing. IEEE Signal
+Processing Magazine 16(6), 22-38 (cubic B-spline interpolation, as
+``scipy.ndimage.map_coordinates(order=3)``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .detail import NOISE_RMS, detail_amplification
+from .sea_floor import flat_sea, lay_sea_floor
+
+__all__ = ["REFINE_ABOVE", "RefinedCrop", "attach_context", "crop_window", "refine_crop"]
+
+#: DEMs of cells this coarse (metres) or coarser are worth refining.
+REFINE_ABOVE = 100.0
+#: Fine cells along the crop's side (the 5 km benchmark's tile is 500 cells a side).
+REFINE_CELLS = 512
+#: Least width of the crop (metres) ...
+CROP_WIDTH_M = 5000.0
+#: ... and least number of DEM cells across it.
+CROP_CELLS = 4
+#: Share of the crop's side over which the detail fades out towards its border.
+TAPER = 0.15
+#: Share of sea a window holding a coast has (with a sea in the DEM).
+COAST_SHARE = (0.15, 0.85)
+
+
+@dataclass
+class RefinedCrop:
+    """A window of a DEM at a finer cell (module docstring).
+
+    Attributes
+    ----------
+    heights : numpy.ndarray
+        ``(cells + 1, cells + 1)`` fine heights (m).
+    cell : float
+        Fine cell (m).
+    window : tuple of int
+        ``(i0, j0, side)``: the window's first sample (column, row) and its cells a side.
+    context : numpy.ndarray
+        The whole DEM (m; its sea floor laid where it was a flat sheet).
+    context_extent : tuple of float
+        ``(x0, y0, x1, y1)`` of the DEM's samples in the crop's frame.
+    coarse_cell : float
+        The DEM's cell (m).
+    notes : list of str
+        What was done, for the scene's header.
+    """
+
+    heights: np.ndarray
+    cell: float
+    window: tuple
+    context: np.ndarray
+    context_extent: tuple
+    coarse_cell: float
+    notes: list = field(default_factory=list)
+
+
+def _window_reduce(A, side, reduce):
+    """``reduce`` (``'max'``, ``'min'`` or ``'mean'``) of ``A`` over every window of
+    ``side + 1`` samples a side: ``out[j0, i0]`` covers rows ``j0 .. j0 + side``."""
+    from scipy.ndimage import maximum_filter, minimum_filter, uniform_filter
+    s = side + 1
+    filt = {"max": maximum_filter, "min": minimum_filter, "mean": uniform_filter}[reduce]
+    out = filt(np.asarray(A, np.float64), size=s, mode="nearest")
+    ny, nx = A.shape
+    return out[s // 2: ny - s + s // 2 + 1, s // 2: nx - s + s // 2 + 1]
+
+
+def crop_window(H, side, sea_level=None):
+    """``(i0, j0)``: the first sample of the window of ``side`` cells (module docstring).
+
+    Parameters
+    ----------
+    H : numpy.ndarray
+        ``(ny, nx)`` elevations (m), ``side <= min(nx, ny) - 1``.
+    side : int
+        Cells along the window's side.
+    sea_level : float, optional
+        With a sea below it, windows holding a coast come first.
+
+    Returns
+    -------
+    (int, int)
+        Column and row of the window's first sample (the first of equal windows in
+        row-major order: the same DEM gives the same window).
+    """
+    relief = _window_reduce(H, side, "max") - _window_reduce(H, side, "min")
+    score = relief
+    if sea_level is not None:
+        wet = _window_reduce((H < sea_level).astype(np.float64), side, "mean")
+        coast = (wet >= COAST_SHARE[0]) & (wet <= COAST_SHARE[1])
+        if coast.any():
+            score = np.where(coast, relief, -1.0)
+    j0, i0 = np.unravel_index(int(np.argmax(score)), score.shape)
+    return int(i0), int(j0)
+
+
+def _fbm_heights(x, y, table):
+    """The detail table's fBm, ``a fbm((x, y, 0) / lambda)``, at points (arrays, metres)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from arches_render.backend import variant
+    from arches_render.field.noise import fbm
+    variant()
+    inv = 1.0 / table["wavelength"]
+    p = mi.Point3f(mi.Float(np.ravel(x) * inv), mi.Float(np.ravel(y) * inv), mi.Float(0.0))
+    value = table["amplitude"] * fbm(p, int(table["octaves"]), table["lacunarity"], table["gain"],
+                                     mi.UInt32(table["seed"]))
+    dr.eval(value)
+    return np.asarray(value.numpy(), np.float64).reshape(np.shape(x))
+
+
+def _smoothstep(u):
+    u = np.clip(u, 0.0, 1.0)
+    return u * u * (3.0 - 2.0 * u)
+
+
+def refine_crop(heights, cell, sea_level=0.0, seed=0, cells=REFINE_CELLS, width=CROP_WIDTH_M):
+    """A window of a coarse DEM at a fine cell, with detail continuing its spectrum.
+
+    Parameters
+    ----------
+    heights : numpy.ndarray
+        ``(ny, nx)`` finite elevations (m), at least 3 x 3.
+    cell : float
+        The DEM's cell (m).
+    sea_level : float or None
+        Sea level (m; ``None``: no sea).
+    seed : int
+        Seed of the detail (same seed, same crop).
+    cells : int
+        Fine cells along the crop's side (>= 8).
+    width : float
+        Least crop width (m).
+
+    Returns
+    -------
+    RefinedCrop
+    """
+    H = np.asarray(heights, np.float64)
+    cell = float(cell)
+    ny, nx = H.shape
+    cells = int(cells)
+    if cells < 8 or min(nx, ny) < 3:
+        raise ValueError(f"refine_crop needs at least 8 fine cells and a 3x3 DEM (got {cells}, {nx}x{ny})")
+    notes = []
+    sheet = flat_sea(H, sea_level)
+    if sheet is not None:
+        H, deepest = lay_sea_floor(H, sheet, cell, sea_level)
+        notes.append(f"the DEM's sea is a flat sheet: a floor was laid under it (at most {deepest:.3g} m deep) "
+                     f"before refining")
+    side = int(min(max(CROP_CELLS, math.ceil(float(width) / cell - 1e-9)), nx - 1, ny - 1))
+    wet_level = None if sea_level is None else float(sea_level)
+    i0, j0 = crop_window(H, side, wet_level)
+    fine = side * cell / cells
+    # The window and a margin of three samples (the spline's support), in window-local indices.
+    m = 3
+    a0, b0 = max(j0 - m, 0), max(i0 - m, 0)
+    sub = H[a0: min(j0 + side + m + 1, ny), b0: min(i0 + side + m + 1, nx)]
+    k = np.arange(cells + 1) * (side / cells)
+    V, U = np.meshgrid(j0 - a0 + k, i0 - b0 + k, indexing="ij")
+    from scipy.ndimage import map_coordinates
+    cubic = map_coordinates(sub, [V, U], order=3, mode="nearest")
+    linear = map_coordinates(sub, [V, U], order=1, mode="nearest")
+    # Detail from the DEM's Nyquist wavelength down to four fine cells (precision 2 fine cells).
+    table, fit = detail_amplification(H, cell, 2.0 * fine, seed=int(seed))
+    x = (np.arange(cells + 1) - 0.5 * cells) * fine
+    X, Y = np.meshgrid(x, x)
+    detail = _fbm_heights(X, Y, table) if table is not None else np.zeros_like(linear)
+    # Fades: towards the border (the crop meets its DEM's bilinear surface) and below the sea.
+    edge = np.minimum(np.arange(cells + 1), np.arange(cells + 1)[::-1]) / (TAPER * cells)
+    w = np.outer(_smoothstep(edge), _smoothstep(edge))
+    if wet_level is not None and table is not None:
+        sigma0 = table["amplitude"] * NOISE_RMS
+        detail *= _smoothstep((linear - wet_level) / max(2.0 * sigma0, 1e-9))
+    fine_H = linear + w * (cubic - linear + detail)
+    centre = ((i0 + 0.5 * side) * cell, (j0 + 0.5 * side) * cell)
+    context_extent = (-centre[0], -centre[1], (nx - 1) * cell - centre[0], (ny - 1) * cell - centre[1])
+    octaves = int(table["octaves"]) if table is not None else 0
+    notes.append(
+        f"refined: a {side * cell / 1000:.3g} km crop of the DEM's {nx - 1}x{ny - 1} cells of {cell:g} m "
+        f"(columns {i0}-{i0 + side}, rows {j0}-{j0 + side}: its greatest relief"
+        f"{', with a coast' if wet_level is not None and 0 < float(np.mean(H < wet_level)) else ''}) at "
+        f"{fine:.3g} m cells, a cubic spline "
+        + (f"with {octaves} fBm octaves of the DEM's spectrum (Hurst {fit['hurst']:.2f})" if octaves
+           else "(the DEM's spectrum gave no detail to continue)")
+        + "; the rest of the DEM is the far field")
+    return RefinedCrop(fine_H, fine, (i0, j0, side), H, context_extent, cell, notes)
+
+
+def attach_context(doc, crop, folder, prefix) -> str:
+    """Write the crop's DEM beside the scene's data and name it in the scene's far field.
+
+    Parameters
+    ----------
+    doc : dict
+        The scene document (:func:`.scene_writer.scene_document`), with one ``far_field``.
+    crop : RefinedCrop
+    folder : Path
+        The work folder the data files are written to.
+    prefix : str
+        Relative path prefix of the data files (as :func:`.amplify.amplify`'s).
+
+    Returns
+    -------
+    str
+        The file's path relative to the scene file.
+    """
+    from pathlib import Path
+    rel = f"{prefix}.context.npy"
+    path = Path(folder) / rel
+    path.parent.mkdir(parents=True, exist_ok=True)
+    np.save(path, crop.context.astype(np.float32))
+    for far in doc.get("far_field", []):
+        far["context"] = {"file": rel, "extent": [float(v) for v in crop.context_extent]}
+    return rel

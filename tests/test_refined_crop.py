@@ -1,0 +1,206 @@
+"""A coarse DEM refined to a crop at the landforms' scale, in its DEM as the far field (issue 34 item 3)."""
+
+from __future__ import annotations
+
+import tomllib
+
+import numpy as np
+import pytest
+
+from helpers import variant
+from robust_helpers import cli_out
+
+CELL = 500.0
+
+
+def _coast(nx=80, ny=64, cell=CELL):
+    """A coarse coast: sea in the west (to -60 m), the shore at x = 12.3 cells, land rising
+    east to a plateau of 1.2 km past x = 20 cells, a hill at (30, 6) on it, and
+    roughness at every scale (the spectrum the detail continues; the fit needs 64 cells)."""
+    x = np.arange(nx) * cell
+    y = np.arange(ny) * cell
+    X, Y = np.meshgrid(x, y)
+    land = 1400.0 / (1.0 + np.exp(-(X / cell - 14.0) / 1.0)) - 210.0
+    hill = 300.0 * np.exp(-(((X - 30 * cell) ** 2 + (Y - 6 * cell) ** 2) / (2 * cell) ** 2))
+    rough = np.random.default_rng(7).normal(0.0, 12.0, X.shape)
+    return np.maximum(land + hill + rough, -60.0)
+
+
+def _bilinear(H, u, v):
+    """``H`` bilinear at fractional column ``u`` and row ``v`` (arrays)."""
+    i = np.clip(np.floor(u).astype(int), 0, H.shape[1] - 2)
+    j = np.clip(np.floor(v).astype(int), 0, H.shape[0] - 2)
+    a, b = u - i, v - j
+    return ((1 - a) * (1 - b) * H[j, i] + a * (1 - b) * H[j, i + 1] + (1 - a) * b * H[j + 1, i]
+            + a * b * H[j + 1, i + 1])
+
+
+def test_window_has_the_greatest_relief_and_a_coast_first():
+    from arches_render.generators.terrain.refined_crop import COAST_SHARE, crop_window
+    # A low coast in the west and a mountain of 2 km far inland.
+    X, Y = np.meshgrid(np.arange(80.0), np.arange(64.0))
+    H = 10.0 * (X - 12.0) + 2000.0 * np.exp(-((X - 60.0) ** 2 + (Y - 30.0) ** 2) / 6.0 ** 2)
+    side = 10
+    i0, j0 = crop_window(H, side)  # no sea: the ridge's flank, the tile's greatest relief
+    win = H[j0:j0 + side + 1, i0:i0 + side + 1]
+    relief = win.max() - win.min()
+    for jj in range(H.shape[0] - side):
+        for ii in range(H.shape[1] - side):
+            w = H[jj:jj + side + 1, ii:ii + side + 1]
+            assert w.max() - w.min() <= relief + 1e-9
+    # With a sea, the window holds a shore: sea and land in COAST_SHARE.
+    assert i0 > 40, (i0, j0)  # the mountain
+    i0, j0 = crop_window(H, side, 0.0)
+    wet = np.mean(H[j0:j0 + side + 1, i0:i0 + side + 1] < 0.0)
+    assert COAST_SHARE[0] <= wet <= COAST_SHARE[1], (i0, j0, wet)
+
+
+def test_crop_is_finer_meets_its_dem_at_the_border_and_keeps_the_same_bits():
+    variant()
+    from arches_render.generators.terrain.refined_crop import refine_crop
+    H = _coast()
+    crop = refine_crop(H, CELL, 0.0, seed=4, cells=64, width=5000.0)
+    i0, j0, side = crop.window
+    assert side == 10 and crop.cell == pytest.approx(side * CELL / 64)
+    Z = crop.heights
+    assert Z.shape == (65, 65)
+    # At the border the crop is the DEM's bilinear surface (what the far field reads there).
+    k = np.arange(65) * side / 64
+    for (u, v, z) in ((i0 + k, np.full(65, j0), Z[0]), (i0 + k, np.full(65, j0 + side), Z[-1]),
+                      (np.full(65, i0), j0 + k, Z[:, 0]), (np.full(65, i0 + side), j0 + k, Z[:, -1])):
+        assert np.abs(z - _bilinear(H, u, v)).max() < 1e-6
+    # Inside, relief below the DEM's cell: the detail departs from the bilinear surface
+    # on land, by metres (the DEM's spectrum continued), not by its relief.
+    U, V = np.meshgrid(i0 + k, j0 + k)
+    lin = _bilinear(H, U, V)
+    inner = np.zeros_like(Z, bool)
+    inner[16:-16, 16:-16] = True
+    land = inner & (lin > 50.0)
+    dev = np.abs(Z - lin)[land]
+    assert land.sum() > 100 and 1.0 < np.median(dev) < 0.2 * (H.max() - H.min())
+    # No detail at or below the sea level (no islands or pools along the shore): there
+    # the seed (which draws only the detail) changes nothing; on land it does.
+    other = refine_crop(H, CELL, 0.0, seed=5, cells=64, width=5000.0)
+    wet = lin <= 0.0
+    assert wet.sum() > 100 and np.array_equal(other.heights[wet], Z[wet])
+    assert np.abs(other.heights - Z)[land].min() > 0.0
+    # The window's centre is the crop's origin in the context's frame.
+    x0, y0, x1, y1 = crop.context_extent
+    assert x0 + (i0 + 0.5 * side) * CELL == pytest.approx(0.0, abs=1e-6)
+    assert y0 + (j0 + 0.5 * side) * CELL == pytest.approx(0.0, abs=1e-6)
+    assert x1 - x0 == pytest.approx((H.shape[1] - 1) * CELL) and y1 - y0 == pytest.approx((H.shape[0] - 1) * CELL)
+    again = refine_crop(H, CELL, 0.0, seed=4, cells=64, width=5000.0)
+    assert np.array_equal(again.heights, Z)
+
+
+def test_far_field_reads_the_context_around_the_tile():
+    variant()
+    from arches_render.field import Heightfield
+    from arches_render.generators.terrain.far_field import far_field_mesh
+    from arches_render.generators.terrain.refined_crop import refine_crop
+    H = _coast()
+    crop = refine_crop(H, CELL, None, seed=1, cells=64, width=5000.0)
+    half = 0.5 * 64 * crop.cell
+    tile = Heightfield(crop.heights.astype(np.float32), (-half, -half, half, half))
+    with_context = far_field_mesh(tile, context=(crop.context, crop.context_extent)).vertices
+    alone = far_field_mesh(tile).vertices
+    x0, y0, x1, y1 = crop.context_extent
+    # Ring vertices within the DEM, a few km past the tile: the DEM's heights there
+    # (blurred as the rings are: within a tenth of its relief), not the tile's continuation.
+    def near_ring(v):
+        d = np.maximum(np.abs(v[:, 0]), np.abs(v[:, 1])) - half
+        keep = (d > 1500.0) & (d < 4000.0) & (v[:, 0] > x0) & (v[:, 0] < x1) & (v[:, 1] > y0) & (v[:, 1] < y1)
+        return v[keep]
+    v = near_ring(with_context)
+    want = _bilinear(H, (v[:, 0] - x0) / CELL, (v[:, 1] - y0) / CELL)
+    relief = H.max() - H.min()
+    assert len(v) > 50 and np.median(np.abs(v[:, 2] - want)) < 0.1 * relief
+    w = near_ring(alone)
+    want_alone = _bilinear(H, (w[:, 0] - x0) / CELL, (w[:, 1] - y0) / CELL)
+    assert np.median(np.abs(w[:, 2] - want_alone)) > 2.0 * np.median(np.abs(v[:, 2] - want))
+
+
+def test_far_field_context_is_checked(tmp_path):
+    variant()
+    from arches_render.scene import load_scene
+    from arches_render.scene.errors import SceneError
+    np.save(tmp_path / "t.npy", np.zeros((5, 5), np.float32))
+    np.save(tmp_path / "c.npy", np.zeros((9, 9), np.float32))
+    base = """
+[camera]
+origin = [-30.0, -30.0, 20.0]
+target = [0.0, 0.0, 0.0]
+[[lights]]
+type = "sunsky"
+elevation = 35.0
+[materials.ground]
+type = "triplanar"
+preset = "terrain"
+[field]
+root = "terrain"
+material = "ground"
+[nodes.terrain]
+type = "heightfield"
+source = "file"
+file = "t.npy"
+extent = [-10.0, -10.0, 10.0, 10.0]
+[[far_field]]
+node = "terrain"
+material = "ground"
+"""
+    ok = tmp_path / "ok.toml"
+    ok.write_text(base + 'context = { file = "c.npy", extent = [-40.0, -40.0, 40.0, 40.0] }\n')
+    far = load_scene(ok).tables["far_field"][0]
+    assert far.context[0].shape == (9, 9) and far.context[1] == (-40.0, -40.0, 40.0, 40.0)
+    for text, key in (('{ file = "c.npy", extent = [-5.0, -40.0, 40.0, 40.0] }', "far_field[0].context.extent"),
+                      ('{ file = "none.npy", extent = [-40.0, -40.0, 40.0, 40.0] }', "far_field[0].context.file"),
+                      ('{ file = "c.npy", extent = [-40.0, -40.0, 40.0, 40.0], blur = 2 }', "blur")):
+        bad = tmp_path / "bad.toml"
+        bad.write_text(base + f"context = {text}\n")
+        with pytest.raises(SceneError) as err:
+            load_scene(bad)
+        assert key in str(err.value), str(err.value)
+
+
+def test_amplify_refine_carves_a_coarse_coast_in_metres(tmp_path, capsys):
+    """``amplify --refine`` on a 500 m coast: a crop of fine cells whose landforms are
+    metres wide, its far field the DEM around it; without ``--refine`` the header says
+    how to get one."""
+    variant()
+    from arches_render.scene import load_scene
+    np.save(tmp_path / "coast.npy", _coast())
+    out = tmp_path / "coast.toml"
+    rc, stdout, err = cli_out(capsys, "amplify", tmp_path / "coast.npy", "-o", out, "--cell-size", "500",
+                              "--refine", "--refine-cells", "128", "--seed", "2", "-q")
+    assert rc == 0, err
+    doc = tomllib.loads(out.read_text())
+    header = [line for line in out.read_text().splitlines() if line.startswith("#")]
+    assert any("refined: a 5 km crop" in line for line in header), header
+    x0, y0, x1, y1 = doc["nodes"]["terrain"]["extent"]
+    assert x1 - x0 == pytest.approx(5000.0) and y1 - y0 == pytest.approx(5000.0)
+    Z = np.load(tmp_path / doc["nodes"]["terrain"]["file"])
+    assert Z.shape == (129, 129)
+    sizes = next(line for line in header if line.startswith("# Landform sizes"))
+    feature = float(sizes.split("feature ")[1].split(",")[0])
+    assert feature < 0.05 * CELL, sizes  # metres, not the DEM's cell
+    sea = np.load(tmp_path / doc["nodes"]["sea_erosion"]["file"])
+    assert np.median(sea["radius"]) < 0.1 * CELL  # the carving primitives too
+    context = doc["far_field"][0]["context"]
+    C = np.load(tmp_path / context["file"])
+    assert C.shape == (64, 80)
+    desc = load_scene(out)
+    far = desc.tables["far_field"][0]
+    assert far.context is not None and len(far.meshes()[0][1].vertices) > 0
+    assert len(desc.cameras) >= 2  # a close shot of what was carved, and the overview
+
+    plain = tmp_path / "plain.toml"
+    rc, stdout, err = cli_out(capsys, "amplify", tmp_path / "coast.npy", "-o", plain, "--cell-size", "500",
+                              "--seed", "2", "--preset", "sea", "-q")
+    assert rc == 0, err
+    assert "--refine amplifies a crop" in plain.read_text()
+    # The same preset on the whole DEM sizes its coastal cliffs by the DEM's cell.
+    def cliff(text):
+        line = next(x for x in text.splitlines() if x.startswith("# Landform sizes"))
+        return float(line.split("coast_cliff ")[1].split(",")[0])
+    assert cliff(plain.read_text()) > 10.0 * cliff(out.read_text())
+    assert "context" not in tomllib.loads(plain.read_text())["far_field"][0]
