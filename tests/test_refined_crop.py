@@ -41,15 +41,18 @@ def test_window_has_the_greatest_relief_and_a_coast_first():
     X, Y = np.meshgrid(np.arange(80.0), np.arange(64.0))
     H = 10.0 * (X - 12.0) + 2000.0 * np.exp(-((X - 60.0) ** 2 + (Y - 30.0) ** 2) / 6.0 ** 2)
     side = 10
-    i0, j0 = crop_window(H, side)  # no sea: the ridge's flank, the tile's greatest relief
-    win = H[j0:j0 + side + 1, i0:i0 + side + 1]
-    relief = win.max() - win.min()
+    i0, j0 = crop_window(H, side)  # no sea: the mountain, the greatest relief in a window's middle
+    mid = slice(2, 2 + side // 2 + 1)  # the middle 5 cells of 10
+
+    def middle(jj, ii):
+        w = H[jj:jj + side + 1, ii:ii + side + 1][mid, mid]
+        return w.max() - w.min()
+    relief = middle(j0, i0)
     for jj in range(H.shape[0] - side):
         for ii in range(H.shape[1] - side):
-            w = H[jj:jj + side + 1, ii:ii + side + 1]
-            assert w.max() - w.min() <= relief + 1e-9
+            assert middle(jj, ii) <= relief + 1e-9
+    assert abs(i0 + side / 2 - 60) < 6 and abs(j0 + side / 2 - 30) < 6, (i0, j0)  # the mountain, in the middle
     # With a sea, the window holds a shore: sea and land in COAST_SHARE.
-    assert i0 > 40, (i0, j0)  # the mountain
     i0, j0 = crop_window(H, side, 0.0)
     wet = np.mean(H[j0:j0 + side + 1, i0:i0 + side + 1] < 0.0)
     assert COAST_SHARE[0] <= wet <= COAST_SHARE[1], (i0, j0, wet)
@@ -64,11 +67,15 @@ def test_crop_is_finer_meets_its_dem_at_the_border_and_keeps_the_same_bits():
     assert side == 10 and crop.cell == pytest.approx(side * CELL / 64)
     Z = crop.heights
     assert Z.shape == (65, 65)
-    # At the border the crop is the DEM's bilinear surface (what the far field reads there).
+    # The context is the DEM resampled (through its samples) a few times denser ...
+    up = (crop.context.shape[1] - 1) // (H.shape[1] - 1)
+    assert up > 1 and crop.context.shape == ((H.shape[0] - 1) * up + 1, (H.shape[1] - 1) * up + 1)
+    assert np.abs(crop.context[::up, ::up] - H).max() < 1e-6
+    # ... and at the border the crop is the context's bilinear surface (what the far field reads).
     k = np.arange(65) * side / 64
     for (u, v, z) in ((i0 + k, np.full(65, j0), Z[0]), (i0 + k, np.full(65, j0 + side), Z[-1]),
                       (np.full(65, i0), j0 + k, Z[:, 0]), (np.full(65, i0 + side), j0 + k, Z[:, -1])):
-        assert np.abs(z - _bilinear(H, u, v)).max() < 1e-6
+        assert np.abs(z - _bilinear(crop.context, u * up, v * up)).max() < 1e-6
     # Inside, relief below the DEM's cell: the detail departs from the bilinear surface
     # on land, by metres (the DEM's spectrum continued), not by its relief.
     U, V = np.meshgrid(i0 + k, j0 + k)
@@ -187,7 +194,7 @@ def test_amplify_refine_carves_a_coarse_coast_in_metres(tmp_path, capsys):
     assert np.median(sea["radius"]) < 0.1 * CELL  # the carving primitives too
     context = doc["far_field"][0]["context"]
     C = np.load(tmp_path / context["file"])
-    assert C.shape == (64, 80)
+    assert C.shape == (63 * 4 + 1, 79 * 4 + 1)
     desc = load_scene(out)
     far = desc.tables["far_field"][0]
     assert far.context is not None and len(far.meshes()[0][1].vertices) > 0

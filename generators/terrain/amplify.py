@@ -91,6 +91,9 @@ class Amplified:
     landforms : Node or None
         The tree without its accessories (fallen blocks): what close shots frame and
         measure (None: ``root``).
+    context : (numpy.ndarray, tuple) or None
+        ``(heights, extent)`` of the DEM the tile is a refined crop of, in the tile's
+        frame (:mod:`.refined_crop`): the ground around the tile.
     """
 
     tables: dict
@@ -109,6 +112,7 @@ class Amplified:
     stats: dict = field(default_factory=dict)
     water_file: str | None = None
     landforms: object = None
+    context: tuple | None = None
 
     @property
     def terrain(self):

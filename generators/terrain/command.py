@@ -212,7 +212,8 @@ def run(args) -> int:
                             progress=lambda done, total, label: (bar.bar.set_postfix_str(label),
                                                                  bar(done, total)),
                             say=lambda line: print(f"arches-render amplify: {args.dem}: {line}", flush=True),
-                            options=None if args.fallen_blocks else {"fallen_blocks": False})
+                            options=None if args.fallen_blocks else {"fallen_blocks": False},
+                            context=None if crop is None else (crop.context, crop.context_extent))
         bar.close()
         shots_bar.close()
         result, doc, lines = kept.result, kept.doc, kept.lines

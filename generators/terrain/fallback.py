@@ -120,7 +120,7 @@ class Attempt:
 
 
 def amplify_soft(heights, cell_size, preset, seed, work_dir, prefix, name, sea_level=0.0, precision=None,
-                 progress=None, shots_progress=None, say=None, options=None):
+                 progress=None, shots_progress=None, say=None, options=None, context=None):
     """Amplify with the best preset that makes a landform (see the module docstring).
 
     Parameters
@@ -148,6 +148,9 @@ def amplify_soft(heights, cell_size, preset, seed, work_dir, prefix, name, sea_l
         ``say(line)`` for the ranking line and each ``nothing to carve`` line, as it happens.
     options : dict, optional
         :func:`.amplify.amplify`'s options, for every attempt.
+    context : (numpy.ndarray, tuple), optional
+        ``(heights, extent)`` of the DEM the heights are a refined crop of
+        (:mod:`.refined_crop`), given to every attempt's result (its overview and far field).
 
     Returns
     -------
@@ -168,7 +171,7 @@ def amplify_soft(heights, cell_size, preset, seed, work_dir, prefix, name, sea_l
     for k, (choice, reason) in enumerate(candidates):
         folder = Path(work_dir) / (f"_try{k + 1}" if k else "")
         run = _Run(partial(_amplify_one, H, cell_size, choice, reason, seed, folder, prefix, sea_level, precision,
-                           progress, options), folder, choice, reason)
+                           progress, options, context), folder, choice, reason)
         runs.append(run)
         if "note" in run.get().stats:  # a flat DEM: no preset acts on it
             break
@@ -185,10 +188,11 @@ def amplify_soft(heights, cell_size, preset, seed, work_dir, prefix, name, sea_l
     return _keep_first_with_shots(runs, name, preset, shots_progress, notes, tell)
 
 
-def _amplify_one(H, cell_size, choice, reason, seed, folder, prefix, sea_level, precision, progress, options):
+def _amplify_one(H, cell_size, choice, reason, seed, folder, prefix, sea_level, precision, progress, options,
+                 context):
     result = amplify(H, cell_size, choice, seed, folder, prefix, sea_level=sea_level, precision=precision,
                      progress=progress, options=options)
-    result.reason = reason
+    result.reason, result.context = reason, context
     return result
 
 

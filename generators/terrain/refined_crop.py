@@ -9,11 +9,13 @@ bring the surface down to the landforms' scale first, on a window of the DEM:
 
 Window
     A square of ``side`` cells, at least :data:`CROP_WIDTH_M` metres and
-    :data:`CROP_CELLS` cells wide (the whole DEM's shorter side at most), where the
-    relief (highest less lowest sample in it) is largest: mountains and escarpments
-    rather than plains (:func:`crop_window`). With a sea, windows holding both sea and
-    land (a share of sea between :data:`COAST_SHARE`) come first, so that a coast
-    has its shore in the crop.
+    :data:`CROP_CELLS` cells wide (the whole DEM's shorter side at most), whose middle
+    (the central ``side / 2`` cells) has the largest relief (highest less lowest
+    sample): mountains and escarpments rather than plains, and in the middle of the
+    crop, not cut by its border (measured over the whole window, a peak sat in the
+    crop's corner, :func:`crop_window`). With a sea, windows holding both sea and land
+    (a share of sea between :data:`COAST_SHARE`) come first, so that a coast has its
+    shore in the crop.
 Surface
     The window resampled at ``side * cell / cells`` metres by a cubic B-spline
     (C2, through the samples), plus fBm octaves that continue the DEM's own spectrum
@@ -21,15 +23,18 @@ Surface
     (:func:`.detail.detail_amplification`'s fit of the whole DEM, the same noise the
     renderer adds below a cell), so that the processes find relief between the
     samples and not a smooth spline. The fBm fades out below the sea level (it would
-    put islands and pools along the shore), and both the fBm and the spline's departure
-    from the bilinear surface fade out over the border's :data:`TAPER` of the crop: at
-    its edge the crop is the DEM's bilinear surface, which is what the far field reads
-    there (``[[far_field]]``'s ``context``, :mod:`.far_field`), so that the crop sits
-    in its DEM without a step.
+    put islands and pools along the shore) and over the border's :data:`TAPER` of the
+    crop, where the surface also turns from the spline to the context's bilinear
+    surface: at its edge the crop is exactly what the far field reads there, so that it
+    sits in its DEM without a step.
 Context
-    The whole DEM, placed in the crop's frame (the crop centred on the origin, as
-    :func:`.amplify.amplify` centres its tiles): the far field continues the crop with
-    the real terrain around it, not with a copy of the crop's own relief.
+    The whole DEM resampled by the same spline at up to :data:`CONTEXT_UPSAMPLE` times
+    its density (at most :data:`CONTEXT_SAMPLES` samples), placed in the crop's frame
+    (the crop centred on the origin, as :func:`.amplify.amplify` centres its tiles):
+    the far field continues the crop with the real terrain around it, not with a copy
+    of the crop's own relief, and in facets a fraction of the DEM's cell (the DEM's own
+    samples, bilinear, made kilometre-wide flat planes and creases around a 2.4 km
+    DEM's crop, and so did the crop's border band).
 
 A DEM whose sea is SRTM's flat sheet gets its floor laid first
 (:func:`.sea_floor.lay_sea_floor`), as amplify does, so the spline does not ring
@@ -68,6 +73,10 @@ CROP_CELLS = 4
 TAPER = 0.15
 #: Share of sea a window holding a coast has (with a sea in the DEM).
 COAST_SHARE = (0.15, 0.85)
+#: The context (the far field's DEM) is the DEM resampled this many times denser ...
+CONTEXT_UPSAMPLE = 4
+#: ... within this many samples.
+CONTEXT_SAMPLES = 4_000_000
 
 
 @dataclass
@@ -83,7 +92,8 @@ class RefinedCrop:
     window : tuple of int
         ``(i0, j0, side)``: the window's first sample (column, row) and its cells a side.
     context : numpy.ndarray
-        The whole DEM (m; its sea floor laid where it was a flat sheet).
+        The whole DEM (m; its sea floor laid where it was a flat sheet), resampled by the
+        spline (module docstring, "Context").
     context_extent : tuple of float
         ``(x0, y0, x1, y1)`` of the DEM's samples in the crop's frame.
     coarse_cell : float
@@ -113,7 +123,8 @@ def _window_reduce(A, side, reduce):
 
 
 def crop_window(H, side, sea_level=None):
-    """``(i0, j0)``: the first sample of the window of ``side`` cells (module docstring).
+    """``(i0, j0)``: the first sample of the window of ``side`` cells whose middle has the
+    greatest relief (module docstring).
 
     Parameters
     ----------
@@ -130,7 +141,11 @@ def crop_window(H, side, sea_level=None):
         Column and row of the window's first sample (the first of equal windows in
         row-major order: the same DEM gives the same window).
     """
-    relief = _window_reduce(H, side, "max") - _window_reduce(H, side, "min")
+    inner = max(side // 2, 1)
+    off = (side - inner) // 2
+    middle = _window_reduce(H, inner, "max") - _window_reduce(H, inner, "min")
+    ny, nx = H.shape
+    relief = middle[off: off + ny - side, off: off + nx - side]  # by the outer window's first sample
     score = relief
     if sea_level is not None:
         wet = _window_reduce((H < sea_level).astype(np.float64), side, "mean")
@@ -208,7 +223,11 @@ def refine_crop(heights, cell, sea_level=0.0, seed=0, cells=REFINE_CELLS, width=
     V, U = np.meshgrid(j0 - a0 + k, i0 - b0 + k, indexing="ij")
     from scipy.ndimage import map_coordinates
     cubic = map_coordinates(sub, [V, U], order=3, mode="nearest")
-    linear = map_coordinates(sub, [V, U], order=1, mode="nearest")
+    up = int(max(1, min(CONTEXT_UPSAMPLE, math.isqrt(CONTEXT_SAMPLES // (nx * ny)))))
+    cv, cu = np.meshgrid(np.arange((ny - 1) * up + 1) / up, np.arange((nx - 1) * up + 1) / up, indexing="ij")
+    context = map_coordinates(H, [cv, cu], order=3, mode="nearest") if up > 1 else H
+    V, U = np.meshgrid((j0 + k) * up, (i0 + k) * up, indexing="ij")
+    linear = map_coordinates(context, [V, U], order=1, mode="nearest")
     # Detail from the DEM's Nyquist wavelength down to four fine cells (precision 2 fine cells).
     table, fit = detail_amplification(H, cell, 2.0 * fine, seed=int(seed))
     x = (np.arange(cells + 1) - 0.5 * cells) * fine
@@ -231,8 +250,8 @@ def refine_crop(heights, cell, sea_level=0.0, seed=0, cells=REFINE_CELLS, width=
         f"{fine:.3g} m cells, a cubic spline "
         + (f"with {octaves} fBm octaves of the DEM's spectrum (Hurst {fit['hurst']:.2f})" if octaves
            else "(the DEM's spectrum gave no detail to continue)")
-        + "; the rest of the DEM is the far field")
-    return RefinedCrop(fine_H, fine, (i0, j0, side), H, context_extent, cell, notes)
+        + f"; the rest of the DEM, by the same spline at {cell / up:.4g} m, is the far field")
+    return RefinedCrop(fine_H, fine, (i0, j0, side), context, context_extent, cell, notes)
 
 
 def attach_context(doc, crop, folder, prefix) -> str:

@@ -84,7 +84,7 @@ LANDFORM_NAMES = {"sea": "sea_cave", "river": "undercut", "karst": "tunnel", "ho
                   "strata": "cliff"}
 
 def frame_camera(heights, extent, features=None, fov=50.0, elevation=10.0, margin=0.5, aspect=16 / 9,
-                 sea_level=None):
+                 sea_level=None, context=None):
     """A landscape photographer's overview: the features seen from their downhill side, the
     horizon in the frame.
 
@@ -111,6 +111,9 @@ def frame_camera(heights, extent, features=None, fov=50.0, elevation=10.0, margi
     sea_level : float, optional
         The far field's sea level, where the sea reaches the tile's border (its ground
         past the tile is held to the border's sea and land: :class:`.ContinuedRelief`).
+    context : (numpy.ndarray, tuple), optional
+        ``(heights, extent)`` of the DEM the tile was refined from (:mod:`.refined_crop`):
+        the ground around the tile, which the far field shows, instead of its continuation.
 
     Returns
     -------
@@ -165,6 +168,10 @@ def frame_camera(heights, extent, features=None, fov=50.0, elevation=10.0, margi
         # Aimed at the landform's middle height (a crater's floor hides behind its rim).
         dist = max(dist, landform[0])
         target[2] = max(target[2], landform[1])
+    if context is not None:
+        # A refined crop: the ground past the tile is the coarse DEM, whose facets in the
+        # foreground read as a seam; the camera stays over the tile, as landform_view's does.
+        dist = min(dist, TILE_INSET * _to_border(target, az, extent))
     el = math.radians(elevation)
     origin = target + dist * np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
     # Keep the camera above the ground under it (clamped lookup for points off the tile).
@@ -181,7 +188,8 @@ def frame_camera(heights, extent, features=None, fov=50.0, elevation=10.0, margi
     ahead = az + math.pi + turns  # from the camera towards the target, across the frame
     qx = origin[0] + s * np.cos(ahead)[None]
     qy = origin[1] + s * np.sin(ahead)[None]
-    ground = ContinuedRelief(H, extent, sea_level).heights(qx.ravel(), qy.ravel(), 0.0).reshape(qx.shape)
+    around = ContinuedRelief(*(context or (H, extent)), sea_level)
+    ground = around.heights(qx.ravel(), qy.ravel(), 0.0).reshape(qx.shape)
     rise = max(float(np.max(ground - s * top - origin[2])), 0.0)
     origin[2] += rise
     target = target + np.array([0.0, 0.0, rise])
@@ -259,14 +267,21 @@ def landform_view(heights, extent, target, azimuth, fov):
     dist = radius / (LANDFORM_FILL * math.tan(math.radians(fov) / 2))
     # The footprint's far edge along the azimuth (samples half a cell apart), and the tile's.
     c, s_ = math.cos(azimuth), math.sin(azimuth)
-    to_border = min((x1 - target[0]) / c if c > 0 else (x0 - target[0]) / c if c < 0 else np.inf,
-                    (y1 - target[1]) / s_ if s_ > 0 else (y0 - target[1]) / s_ if s_ < 0 else np.inf)
+    to_border = _to_border(target, azimuth, extent)
     s = np.arange(0.0, to_border, 0.5 * min(dx, dy))
     on = labels[np.round((target[1] + s * s_ - y0) / dy).astype(int),
                 np.round((target[0] + s * c - x0) / dx).astype(int)] == own
     edge = float(s[np.flatnonzero(on)[-1]]) if on.any() else 0.0
     return (min(max(dist, edge * (1.0 + LANDFORM_CLEARANCE)), TILE_INSET * to_border),
             float(np.median(H[footprint])))
+
+
+def _to_border(target, azimuth, extent) -> float:
+    """Distance from ``target`` (inside ``extent``) along ``azimuth`` (radians) to the tile's border."""
+    x0, y0, x1, y1 = extent
+    c, s = math.cos(azimuth), math.sin(azimuth)
+    return min((x1 - target[0]) / c if c > 0 else (x0 - target[0]) / c if c < 0 else np.inf,
+               (y1 - target[1]) / s if s > 0 else (y0 - target[1]) / s if s < 0 else np.inf)
 
 
 def sun_for(views, elevation=35.0, turn=55.0):
@@ -486,7 +501,7 @@ def scene_document(result, name, work_dir, progress=None, close=3):
     feature = result.feature
     over = frame_camera(H, extent, result.focus,
                         sea_level=float(water.sea_level) if water is not None and water.wet and water.touches_border
-                        else None)
+                        else None, context=result.context)
     overview = {"origin": over["origin"], "target": over["target"], "fov": over["fov"]}
 
     def sun_views(first):
