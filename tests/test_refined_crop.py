@@ -211,3 +211,19 @@ def test_amplify_refine_carves_a_coarse_coast_in_metres(tmp_path, capsys):
         return float(line.split("coast_cliff ")[1].split(",")[0])
     assert cliff(plain.read_text()) > 10.0 * cliff(out.read_text())
     assert "context" not in tomllib.loads(plain.read_text())["far_field"][0]
+
+
+def test_overview_of_a_refined_crop_stands_over_it():
+    """The far field around a refined crop is the coarse DEM: the overview's camera stays
+    over the crop (its facets in the foreground read as a seam); a tile's own overview
+    may stand past its border."""
+    variant()
+    from arches_render.generators.terrain.refined_crop import refine_crop
+    from arches_render.generators.terrain.scene_writer import TILE_INSET, frame_camera
+    crop = refine_crop(_coast(), CELL, 0.0, seed=1, cells=64, width=5000.0)
+    half = 0.5 * 64 * crop.cell
+    extent = (-half, -half, half, half)
+    alone = frame_camera(crop.heights, extent)
+    assert max(abs(alone["origin"][0]), abs(alone["origin"][1])) > half
+    cam = frame_camera(crop.heights, extent, context=(crop.context, crop.context_extent))
+    assert max(abs(cam["origin"][0]), abs(cam["origin"][1])) <= TILE_INSET * half + 1e-6
