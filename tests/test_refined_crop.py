@@ -205,11 +205,12 @@ def test_amplify_refine_carves_a_coarse_coast_in_metres(tmp_path, capsys):
                               "--seed", "2", "--preset", "sea", "-q")
     assert rc == 0, err
     assert "--refine amplifies a crop" in plain.read_text()
-    # The same preset on the whole DEM sizes its coastal cliffs by the DEM's cell.
+    # The same preset on the whole DEM sizes its coastal cliffs by the DEM's cell; the
+    # crop's are its benches' risers (a tenth of its relief, here 100 m).
     def cliff(text):
         line = next(x for x in text.splitlines() if x.startswith("# Landform sizes"))
         return float(line.split("coast_cliff ")[1].split(",")[0])
-    assert cliff(plain.read_text()) > 10.0 * cliff(out.read_text())
+    assert cliff(plain.read_text()) >= CELL and cliff(out.read_text()) <= 0.25 * CELL
     assert "context" not in tomllib.loads(plain.read_text())["far_field"][0]
 
 
@@ -227,3 +228,21 @@ def test_overview_of_a_refined_crop_stands_over_it():
     assert max(abs(alone["origin"][0]), abs(alone["origin"][1])) > half
     cam = frame_camera(crop.heights, extent, context=(crop.context, crop.context_extent))
     assert max(abs(cam["origin"][0]), abs(cam["origin"][1])) <= TILE_INSET * half + 1e-6
+
+
+def test_steep_slopes_become_benches_with_walls(monkeypatch):
+    """A 25 degree ramp at 200 m cells hides cliff bands: refined, it has walls (the strata
+    preset's rule), and gentle ground is left as the spline made it."""
+    variant()
+    from arches_render.generators.terrain import refined_crop
+    from arches_render.generators.terrain.preset_choice import has_walls, terrain_stats
+    X, _ = np.meshgrid(np.arange(40.0), np.arange(40.0))
+    ramp = np.clip(X - 14.0, 0.0, 12.0) * 200.0 * np.tan(np.radians(25.0))  # 1.1 km over 2.4 km
+    crop = refined_crop.refine_crop(ramp, 200.0, None, seed=3, cells=128, width=5000.0)
+    monkeypatch.setattr(refined_crop, "BENCH_SLOPES", (89.0, 90.0))  # no slope that steep: no benches
+    smooth = refined_crop.refine_crop(ramp, 200.0, None, seed=3, cells=128, width=5000.0)
+    assert has_walls(terrain_stats(crop.heights, crop.cell, -1e4))
+    assert not has_walls(terrain_stats(smooth.heights, smooth.cell, -1e4))
+    gy, gx = np.gradient(smooth.heights, smooth.cell)
+    gentle = np.degrees(np.arctan(np.hypot(gx, gy))) < 5.0
+    assert gentle.mean() > 0.2 and np.array_equal(crop.heights[gentle], smooth.heights[gentle])

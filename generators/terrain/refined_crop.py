@@ -22,7 +22,10 @@ Surface
     from its Nyquist wavelength (two cells) down to four fine cells
     (:func:`.detail.detail_amplification`'s fit of the whole DEM, the same noise the
     renderer adds below a cell), so that the processes find relief between the
-    samples and not a smooth spline. The fBm fades out below the sea level (it would
+    samples and not a smooth spline. Where the spline is steep it is stepped into
+    benches and risers (:func:`_benches`: a coarse cell averages a cliff band and its
+    bench into one slope, and a ramp has no wall to undercut). The fBm fades out below
+    the sea level (it would
     put islands and pools along the shore) and over the border's :data:`TAPER` of the
     crop, where the surface also turns from the spline to the context's bilinear
     surface: at its edge the crop is exactly what the far field reads there, so that it
@@ -172,6 +175,46 @@ def _fbm_heights(x, y, table):
     return np.asarray(value.numpy(), np.float64).reshape(np.shape(x))
 
 
+#: Slopes (degrees) over which the surface turns into benches and risers.
+BENCH_SLOPES = (12.0, 22.0)
+#: Share of a band's height its riser takes (the rest is its bench).
+RISER = 0.3
+
+
+def _benches(Z, cell, sea_level, seed):
+    """``Z`` stepped into benches and risers where it is steep, and the band height (m).
+
+    A DEM of 100 m cells averages a cliff band and the bench above it into one slope
+    (an escarpment of 30 degrees at 200 m cells hides walls a hundred metres tall); a
+    spline through it is a smooth ramp, where no process finds a wall to undercut.
+    Where the slope passes :data:`BENCH_SLOPES`, heights are mapped through a staircase
+    of bands ``b`` tall, each a flat bench and a riser of :data:`RISER` of it (on a
+    slope ``g`` the riser climbs at ``g / RISER``: 27 degrees become 60), the
+    band boundaries warped by fBm a band high (strata are not contour lines):
+    ``b`` is a tenth of the crop's relief, 40-200 m (the strata thickness of
+    :func:`.preset_choice.landform_scales` on real escarpments). Not in the paper,
+    which amplifies DEMs that resolve their cliffs; this restores what the cell averaged.
+    """
+    gy, gx = np.gradient(Z, cell, cell)
+    slope = np.degrees(np.arctan(np.hypot(gx, gy)))
+    lo, hi = BENCH_SLOPES
+    weight = _smoothstep((slope - lo) / (hi - lo))
+    if sea_level is not None:
+        weight *= _smoothstep((Z - sea_level) / 10.0)
+    band = float(np.clip(0.1 * (Z.max() - Z.min()), 40.0, 200.0))
+    if not weight.any():
+        return Z, band
+    n = Z.shape[0] - 1
+    x = (np.arange(n + 1) - 0.5 * n) * cell
+    X, Y = np.meshgrid(x, x)
+    warp = _fbm_heights(X, Y, dict(amplitude=band / 0.5, wavelength=20.0 * band, octaves=3, lacunarity=2.0,
+                                   gain=0.5, seed=int(seed) + 7919))
+    q = (Z + warp) / band
+    t = q - np.floor(q)
+    stair = (np.floor(q) + _smoothstep((t - (1.0 - RISER)) / RISER)) * band - warp
+    return Z + weight * (stair - Z), band
+
+
 def _smoothstep(u):
     u = np.clip(u, 0.0, 1.0)
     return u * u * (3.0 - 2.0 * u)
@@ -239,7 +282,8 @@ def refine_crop(heights, cell, sea_level=0.0, seed=0, cells=REFINE_CELLS, width=
     if wet_level is not None and table is not None:
         sigma0 = table["amplitude"] * NOISE_RMS
         detail *= _smoothstep((linear - wet_level) / max(2.0 * sigma0, 1e-9))
-    fine_H = linear + w * (cubic - linear + detail)
+    benched, bands = _benches(cubic, fine, wet_level, seed)
+    fine_H = linear + w * (benched - linear + detail)
     centre = ((i0 + 0.5 * side) * cell, (j0 + 0.5 * side) * cell)
     context_extent = (-centre[0], -centre[1], (nx - 1) * cell - centre[0], (ny - 1) * cell - centre[1])
     octaves = int(table["octaves"]) if table is not None else 0
@@ -250,6 +294,7 @@ def refine_crop(heights, cell, sea_level=0.0, seed=0, cells=REFINE_CELLS, width=
         f"{fine:.3g} m cells, a cubic spline "
         + (f"with {octaves} fBm octaves of the DEM's spectrum (Hurst {fit['hurst']:.2f})" if octaves
            else "(the DEM's spectrum gave no detail to continue)")
+        + f", stepped into benches and risers {bands:.3g} m tall on slopes over {BENCH_SLOPES[0]:g} deg"
         + f"; the rest of the DEM, by the same spline at {cell / up:.4g} m, is the far field")
     return RefinedCrop(fine_H, fine, (i0, j0, side), context, context_extent, cell, notes)
 
