@@ -246,3 +246,25 @@ def test_steep_slopes_become_benches_with_walls(monkeypatch):
     gy, gx = np.gradient(smooth.heights, smooth.cell)
     gentle = np.degrees(np.arctan(np.hypot(gx, gy))) < 5.0
     assert gentle.mean() > 0.2 and np.array_equal(crop.heights[gentle], smooth.heights[gentle])
+
+
+def test_a_refined_crop_takes_its_regions_snow_line(tmp_path, capsys):
+    """The material's layers follow the DEM around the crop: the crop of a steep 2.5 km
+    peak beside a broad 4 km massif keeps the region's snow line (the top quarter of the
+    region's rise), not its own."""
+    variant()
+    X, Y = np.meshgrid(np.arange(64.0), np.arange(64.0))
+    H = (4000.0 * np.exp(-((X - 16.0) ** 2 + (Y - 32.0) ** 2) / 20.0 ** 2)
+         + 2500.0 * np.exp(-((X - 50.0) ** 2 + (Y - 32.0) ** 2) / 2.5 ** 2) + 200.0)
+    H += np.random.default_rng(1).normal(0.0, 20.0, H.shape)
+    np.save(tmp_path / "m.npy", H)
+    out = tmp_path / "m.toml"
+    rc, _, err = cli_out(capsys, "amplify", tmp_path / "m.npy", "-o", out, "--cell-size", "200", "--refine",
+                         "--refine-cells", "64", "--sea-level", "-1000", "-q")
+    assert rc == 0, err
+    doc = tomllib.loads(out.read_text())
+    crop = np.load(tmp_path / doc["nodes"]["terrain"]["file"])
+    snow = doc["materials"]["landscape"]["overrides"]["snow.height_min"]
+    C = np.load(tmp_path / doc["far_field"][0]["context"]["file"])
+    assert abs(snow - (C.max() - 0.25 * (C.max() - C.min()))) < 1.0
+    assert abs(snow - (crop.max() - 0.25 * (crop.max() - crop.min()))) > 50.0

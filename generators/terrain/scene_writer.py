@@ -492,7 +492,10 @@ def scene_document(result, name, work_dir, progress=None, close=3):
 
     from .shots import close_shots, view_azimuth
     H, extent = result.heights, result.extent
-    zlo, zhi = float(H.min()), float(H.max())
+    # The layers' heights (sand, grass, snow line) are the region's: a refined crop's
+    # come from the DEM around it (its snow line is the mountains', not the crop's top).
+    region = H if result.context is None else result.context[0]
+    zlo, zhi = float(np.min(region)), float(np.max(region))
     x0, y0, x1, y1 = extent
     size = max(x1 - x0, y1 - y0)
     stats = result.stats
