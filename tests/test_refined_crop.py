@@ -185,15 +185,15 @@ def test_amplify_refine_carves_a_coarse_coast_in_metres(tmp_path, capsys):
     assert any("refined: a 5 km crop" in line for line in header), header
     x0, y0, x1, y1 = doc["nodes"]["terrain"]["extent"]
     assert x1 - x0 == pytest.approx(5000.0) and y1 - y0 == pytest.approx(5000.0)
-    Z = np.load(tmp_path / doc["nodes"]["terrain"]["file"])
+    Z = np.load(tmp_path / doc["nodes"]["terrain"]["file"], allow_pickle=False)
     assert Z.shape == (129, 129)
     sizes = next(line for line in header if line.startswith("# Landform sizes"))
     feature = float(sizes.split("feature ")[1].split(",")[0])
     assert feature < 0.05 * CELL, sizes  # metres, not the DEM's cell
-    sea = np.load(tmp_path / doc["nodes"]["sea_erosion"]["file"])
+    sea = np.load(tmp_path / doc["nodes"]["sea_erosion"]["file"], allow_pickle=False)
     assert np.median(sea["radius"]) < 0.1 * CELL  # the carving primitives too
     context = doc["far_field"][0]["context"]
-    C = np.load(tmp_path / context["file"])
+    C = np.load(tmp_path / context["file"], allow_pickle=False)
     assert C.shape == (63 * 4 + 1, 79 * 4 + 1)
     desc = load_scene(out)
     far = desc.tables["far_field"][0]
@@ -263,8 +263,8 @@ def test_a_refined_crop_takes_its_regions_snow_line(tmp_path, capsys):
                          "--refine-cells", "64", "--sea-level", "-1000", "-q")
     assert rc == 0, err
     doc = tomllib.loads(out.read_text())
-    crop = np.load(tmp_path / doc["nodes"]["terrain"]["file"])
+    crop = np.load(tmp_path / doc["nodes"]["terrain"]["file"], allow_pickle=False)
     snow = doc["materials"]["landscape"]["overrides"]["snow.height_min"]
-    C = np.load(tmp_path / doc["far_field"][0]["context"]["file"])
+    C = np.load(tmp_path / doc["far_field"][0]["context"]["file"], allow_pickle=False)
     assert abs(snow - (C.max() - 0.25 * (C.max() - C.min()))) < 1.0
     assert abs(snow - (crop.max() - 0.25 * (crop.max() - crop.min()))) > 50.0
