@@ -99,8 +99,6 @@ class RefinedCrop:
         spline (module docstring, "Context").
     context_extent : tuple of float
         ``(x0, y0, x1, y1)`` of the DEM's samples in the crop's frame.
-    coarse_cell : float
-        The DEM's cell (m).
     notes : list of str
         What was done, for the scene's header.
     """
@@ -110,7 +108,6 @@ class RefinedCrop:
     window: tuple
     context: np.ndarray
     context_extent: tuple
-    coarse_cell: float
     notes: list = field(default_factory=list)
 
 
@@ -258,17 +255,17 @@ def refine_crop(heights, cell, sea_level=0.0, seed=0, cells=REFINE_CELLS, width=
     wet_level = None if sea_level is None else float(sea_level)
     i0, j0 = crop_window(H, side, wet_level)
     fine = side * cell / cells
-    # The window and a margin of three samples (the spline's support), in window-local indices.
-    m = 3
-    a0, b0 = max(j0 - m, 0), max(i0 - m, 0)
-    sub = H[a0: min(j0 + side + m + 1, ny), b0: min(i0 + side + m + 1, nx)]
+    # One spline of the DEM serves the crop and the context.
+    from scipy.ndimage import map_coordinates, spline_filter
+    coefficients = spline_filter(H, order=3, mode="nearest")
+
+    def spline(v, u):
+        return map_coordinates(coefficients, [v, u], order=3, mode="nearest", prefilter=False)
     k = np.arange(cells + 1) * (side / cells)
-    V, U = np.meshgrid(j0 - a0 + k, i0 - b0 + k, indexing="ij")
-    from scipy.ndimage import map_coordinates
-    cubic = map_coordinates(sub, [V, U], order=3, mode="nearest")
+    cubic = spline(*np.meshgrid(j0 + k, i0 + k, indexing="ij"))
     up = int(max(1, min(CONTEXT_UPSAMPLE, math.isqrt(CONTEXT_SAMPLES // (nx * ny)))))
     cv, cu = np.meshgrid(np.arange((ny - 1) * up + 1) / up, np.arange((nx - 1) * up + 1) / up, indexing="ij")
-    context = map_coordinates(H, [cv, cu], order=3, mode="nearest") if up > 1 else H
+    context = spline(cv, cu) if up > 1 else H
     V, U = np.meshgrid((j0 + k) * up, (i0 + k) * up, indexing="ij")
     linear = map_coordinates(context, [V, U], order=1, mode="nearest")
     # Detail from the DEM's Nyquist wavelength down to four fine cells (precision 2 fine cells).
@@ -287,16 +284,18 @@ def refine_crop(heights, cell, sea_level=0.0, seed=0, cells=REFINE_CELLS, width=
     centre = ((i0 + 0.5 * side) * cell, (j0 + 0.5 * side) * cell)
     context_extent = (-centre[0], -centre[1], (nx - 1) * cell - centre[0], (ny - 1) * cell - centre[1])
     octaves = int(table["octaves"]) if table is not None else 0
+    wet = float(np.mean(H[j0:j0 + side + 1, i0:i0 + side + 1] < wet_level)) if wet_level is not None else 0.0
+    coast = COAST_SHARE[0] <= wet <= COAST_SHARE[1]
     notes.append(
         f"refined: a {side * cell / 1000:.3g} km crop of the DEM's {nx - 1}x{ny - 1} cells of {cell:g} m "
         f"(columns {i0}-{i0 + side}, rows {j0}-{j0 + side}: its greatest relief"
-        f"{', with a coast' if wet_level is not None and 0 < float(np.mean(H < wet_level)) else ''}) at "
+        f"{', with a coast' if wet_level is not None and coast else ''}) at "
         f"{fine:.3g} m cells, a cubic spline "
         + (f"with {octaves} fBm octaves of the DEM's spectrum (Hurst {fit['hurst']:.2f})" if octaves
            else "(the DEM's spectrum gave no detail to continue)")
         + f", stepped into benches and risers {bands:.3g} m tall on slopes over {BENCH_SLOPES[0]:g} deg"
         + f"; the rest of the DEM, by the same spline at {cell / up:.4g} m, is the far field")
-    return RefinedCrop(fine_H, fine, (i0, j0, side), context, context_extent, cell, notes)
+    return RefinedCrop(fine_H, fine, (i0, j0, side), context, context_extent, notes)
 
 
 def attach_context(doc, crop, folder, prefix) -> str:
