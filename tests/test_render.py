@@ -124,6 +124,70 @@ def test_same_seed_same_bits_other_seed_differs():
     assert not np.array_equal(a, c)
 
 
+#: A heightfield blended with a ball: the hybrid caster's loops (cast, probe, near).
+MINI_HYBRID = """
+[render]
+resolution = [48, 30]
+[camera]
+origin = [-30.0, -40.0, 25.0]
+target = [0.0, 0.0, 0.0]
+[[lights]]
+type = "sunsky"
+elevation = 30.0
+[materials.rock]
+type = "triplanar"
+preset = "terrain"
+[field]
+root = "ground"
+material = "rock"
+[nodes.hills]
+type = "heightfield"
+extent = [-40.0, -40.0, 40.0, 40.0]
+resolution = [81, 81]
+amplitude = 12.0
+wavelength = 30.0
+seed = 2
+[nodes.ground]
+type = "blend"
+radius = 2.0
+children = ["hills", { type = "sphere", center = [0.0, 0.0, 8.0], radius = 6.0 }]
+"""
+
+
+@pytest.mark.parametrize("case", ["sphere", "wavefront", "cells", "hybrid", "mesh"])
+def test_a_render_traces_each_loop_body_once(case, monkeypatch):
+    """Python traces each symbolic loop's body once (the path loop, the marches, the
+    queue, the heightfield caster's loops, the cavity's and the sets' lists): Dr.Jit
+    records a loop again when its state holds a variable that the body leaves
+    unchanged (the loop optimisation; a width-1 parameter of the integrator, the
+    scene or a tracer; a side effect's target), and loops in loops multiplied it:
+    a quarter to a third of a small render was tracing (sample_megakernel)."""
+    import tomllib
+    text = MINI_HYBRID if case == "hybrid" else MINI
+    if case in ("wavefront", "cells"):
+        option = "wavefront" if case == "wavefront" else "surface_cells"
+        text = text.replace("[render]\n", f"[render]\n{option} = true\n", 1)
+    desc = parse_scene(tomllib.loads(text), SCENES / "mini.toml")
+    scene = build_scene(desc, "mesh" if case == "mesh" else "field", 48, 30)
+    render_image(scene, 2, seed=1)  # kernels compiled; the counts below are tracing only
+    loops, bodies = {}, {}
+    while_loop = dr.while_loop
+
+    def counted(state, cond, body, *args, label=None, **kwargs):
+        loops[label] = loops.get(label, 0) + 1
+
+        def traced(*state):
+            bodies[label] = bodies.get(label, 0) + 1
+            return body(*state)
+        return while_loop(state, cond, traced, *args, label=label, **kwargs)
+    monkeypatch.setattr(dr, "while_loop", counted)
+    render_image(scene, 2, seed=1)
+    expected = {"sphere": "sphere_trace", "wavefront": "queued_march", "cells": "cell_trace",
+                "hybrid": "heightfield_hybrid", "mesh": "implicit_path"}[case]
+    assert loops.get(expected, 0) >= 1, loops
+    assert bodies == loops
+
+
 def test_changing_parameters_does_not_recompile():
     import tomllib
     desc = parse_scene(tomllib.loads(MINI), SCENES / "mini.toml")

@@ -121,7 +121,9 @@ class CellTracer:
         alive = mi.Bool(active)
         steps = mi.UInt32(0)
         cells = mi.UInt32(0)
-        while dr.hint(alive & (steps < budget), label="cell_trace"):
+        # Read-only values stay out of the loop's state: Dr.Jit records a loop's body
+        # again to drop a variable it leaves unchanged (integrator.sample_megakernel).
+        while dr.hint(alive & (steps < budget), label="cell_trace", exclude=[self, o, d, t_end, cone]):
             # A jump over empty cells where the ray's point allows one, then a sphere
             # step from where it lands: each iteration evaluates the field once, so a
             # packet whose lanes disagree runs one body, and the jumps ride along.

@@ -223,7 +223,11 @@ class HeightfieldCaster:
         rounds = mi.UInt32(0)
         steps = mi.UInt32(0)
         cells = mi.UInt32(0)
-        while dr.hint(alive & (steps < budget) & (rounds < MAX_ROUNDS), label="heightfield_hybrid"):
+        # Read-only values stay out of the loop's state: Dr.Jit records a loop's body
+        # again to drop a variable it leaves unchanged (integrator.sample_megakernel).
+        while dr.hint(alive & (steps < budget) & (rounds < MAX_ROUNDS), label="heightfield_hybrid",
+                      exclude=[self, CAST, PROBE, NEAR, o, d, cone, t_end, t_in, ta, tb, z0, z1, misses_zone,
+                               spans]):
             # CAST: finish the current stretch.
             casting = alive & (mode == CAST)
             cast = self.traversal.cast(o, d, t, t_hi, casting, t > t_in, any_hit)
@@ -317,7 +321,9 @@ class HeightfieldCaster:
         leave = mi.Bool(False)
         alive = mi.Bool(active)
         steps = mi.UInt32(steps)
-        while dr.hint(alive & (steps < budget), label="hf_near"):
+        # Read-only values stay out of the loop's state: Dr.Jit records a loop's body
+        # again to drop a variable it leaves unchanged (integrator.sample_megakernel).
+        while dr.hint(alive & (steps < budget), label="hf_near", exclude=[self, o, d, cone, t_end, near_end]):
             t_now = march.t
             if dr.hint(any_hit, mode="scalar"):
                 march, out, r, shadow = self.sphere.step(o, d, march, t_end, cone, shadow)

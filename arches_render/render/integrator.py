@@ -303,17 +303,33 @@ class _ImplicitPathImpl:
         """The :class:`~.path_state.PathState` of paths about to trace camera rays ``ray``
         (``width``: as :meth:`.PathState.start`)."""
         aov = self.primary_aov_count() if self.aovs else 0
-        return PathState.start(mi.Ray3f(ray), active, self.camera_cone(sampler, ray) or (),
+        ray = mi.Ray3f(ray)
+        # The camera's time, which every vertex passes on unchanged, as an array: as a
+        # width-1 literal it made Dr.Jit record the path loop twice (sample_megakernel).
+        ray.time = ray.time + dr.zeros(mi.Float, dr.width(ray.d))
+        return PathState.start(ray, active, self.camera_cone(sampler, ray) or (),
                                self.atmosphere is not None and self.aovs, aov,
                                2 * len(RAY_COUNT_KINDS) if aov and self.tracer else 0, width)
 
     @dr.syntax
     def sample_megakernel(self, scene, sampler, ray, active=True):
-        """:meth:`sample` as one symbolic loop over :meth:`path_vertex`."""
+        """:meth:`sample` as one symbolic loop over :meth:`path_vertex`.
+
+        Python traces each loop's body once. Dr.Jit records a symbolic loop's body
+        again when the loop's state holds a variable the body leaves unchanged: with
+        ``OptimizeLoops`` (the default) to drop it from the loop, without it when it is
+        a width-1 value. Loops in loops multiplied the recordings: a quarter to a third
+        of a 160x90 render was tracing. So every loop keeps its read-only values out of
+        its state (``dr.hint(..., exclude=...)``). This loop's state is the paths and
+        the sampler; the camera rays' time, which the paths carry unchanged, stays in
+        it with the optimisation off for this loop only (one phi), on again for the
+        loops inside. ``tests/test_render.py`` checks that each body is traced once."""
         ctx = mi.BSDFContext()
         path = self.start_paths(sampler, ray, active)
-        while dr.hint(path.active, label="implicit_path"):
-            path = self.path_vertex(scene, sampler, ctx, path)
+        with dr.scoped_set_flag(dr.JitFlag.OptimizeLoops, False):
+            while dr.hint(path.active, label="implicit_path", exclude=[self, scene, ctx]):
+                with dr.scoped_set_flag(dr.JitFlag.OptimizeLoops, True):
+                    path = self.path_vertex(scene, sampler, ctx, path)
         return path.L, path.valid, self.outputs(path.L, path.aov, path.clear, path.counts)
 
     def path_vertex(self, scene, sampler, ctx, path):

@@ -159,7 +159,9 @@ class MipmapTraversal:
         alive = mi.Bool(active)
         iterations = mi.UInt32(0)
         max_iter = self.max_iterations
-        while dr.hint(alive, label="hf_cast"):
+        # Read-only values stay out of the loop's state: Dr.Jit records a loop's body
+        # again to drop a variable it leaves unchanged (integrator.sample_megakernel).
+        while dr.hint(alive, label="hf_cast", exclude=[self, ray, t_hi]):
             cell = self._visit(ray, t, t_hi, level, ci, cj, alive, any_hit)
             found |= cell.hit
             t_hit = dr.select(cell.hit, cell.t_hit, t_hit)

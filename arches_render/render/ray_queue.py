@@ -96,7 +96,11 @@ def queued_march(tracer, o, d, t_start, t_end, active, cone=None, any_hit=False,
         shadow = ShadowProbe.start(n) if any_hit else None
         hit, invalid, steps = dr.zeros(mi.Bool, n), dr.zeros(mi.Bool, n), dr.zeros(mi.UInt32, n)
         going = dr.full(mi.Bool, True, n)
-        while dr.hint(going, label="queued_march"):
+        # The rays and the outputs are read and scattered to, never loop state: as state
+        # (of another width than the lanes), Dr.Jit recorded the body twice
+        # (integrator.sample_megakernel).
+        while dr.hint(going, label="queued_march", exclude=[tracer, total, queue, rays, o, d, t_start, t_end, cone,
+                                                             hit_out, unresolved_out, t_out, steps_out]):
             if dr.hint(any_hit, mode="scalar"):
                 march, out, _, shadow = tracer.step(p, u, march, end, lane_cone or None, shadow)
             else:

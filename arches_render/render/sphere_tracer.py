@@ -170,7 +170,9 @@ class SphereTracer:
         steps = mi.UInt32(0)
         # The budget ends the loop (its condition), not ``alive``: a lane still alive
         # when it runs out is what march_result reports as unresolved.
-        while dr.hint(alive & (steps < budget), label="sphere_trace"):
+        # Read-only values stay out of the loop's state: Dr.Jit records a loop's body
+        # again to drop a variable it leaves unchanged (integrator.sample_megakernel).
+        while dr.hint(alive & (steps < budget), label="sphere_trace", exclude=[self, o, d, t_end, cone]):
             if dr.hint(any_hit, mode="scalar"):
                 march, out, _, shadow = self.step(o, d, march, t_end, cone, shadow)
             else:
