@@ -57,6 +57,7 @@ Proceedings of SIGGRAPH 94, 239–246.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import re
 from dataclasses import dataclass, fields
@@ -286,6 +287,7 @@ class _TriplanarImpl:
         self.look = M.Look(props, count)
         self.m_flags = mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
         self.m_components = [self.m_flags]
+        self._elsewhere = False  # (shaded_elsewhere)
 
     # ----------------------------------------------------------------- public
     def set_layer_mask(self, i: int, node, lo: float = 0.0, hi: float = 1.0, kind: str = "node") -> None:
@@ -491,6 +493,18 @@ class _TriplanarImpl:
         albedo, ca, cb = state
         return albedo, ca, cb, n_local
 
+    @contextlib.contextmanager
+    def shaded_elsewhere(self):
+        """While the integrator, having shaded this material's lanes once (:meth:`shade`),
+        calls every BSDF of the scene on the other lanes: none reaches this one, so its
+        :meth:`sample` and :meth:`eval_pdf` return zeros without tracing the shading
+        (which was half the Python tracing of a small render)."""
+        self._elsewhere = True
+        try:
+            yield
+        finally:
+            self._elsewhere = False
+
     def _brdf_cos(self, si, wo, active, shading=None):
         """``f * cos(theta_o') * pi / cos(theta_o')`` (the cosine-sampling weight about the bumped
         normal), the validity mask and the bumped local normal."""
@@ -510,7 +524,7 @@ class _TriplanarImpl:
         """Cosine sample about the bumped normal; the weight is ``eval / pdf``
         (``shading``: :meth:`shade` of ``si``, if the caller has it)."""
         bs = dr.zeros(mi.BSDFSample3f)
-        if not ctx.is_enabled(mi.BSDFFlags.DiffuseReflection):
+        if not ctx.is_enabled(mi.BSDFFlags.DiffuseReflection) or self._elsewhere:
             return bs, mi.Color3f(0.0)
         active = mi.Bool(active)
         if shading is None:
@@ -540,7 +554,7 @@ class _TriplanarImpl:
 
     def eval_pdf(self, ctx, si, wo, active=True, shading=None):
         """``(eval, pdf)`` sharing one shading evaluation (``shading``: as for :meth:`sample`)."""
-        if not ctx.is_enabled(mi.BSDFFlags.DiffuseReflection):
+        if not ctx.is_enabled(mi.BSDFFlags.DiffuseReflection) or self._elsewhere:
             return mi.Color3f(0.0), mi.Float(0.0)
         value, valid, cos_o = self._brdf_cos(si, wo, active, shading)
         return value * dr.inv_pi * cos_o, dr.select(valid, cos_o * dr.inv_pi, 0.0)

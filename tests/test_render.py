@@ -188,6 +188,26 @@ def test_a_render_traces_each_loop_body_once(case, monkeypatch):
     assert bodies == loops
 
 
+@pytest.mark.parametrize("geometry", ["field", "mesh"])
+def test_a_render_traces_the_material_once(geometry, monkeypatch):
+    """The field's material is shaded once a vertex (``shade``), and its tracing too: the
+    calls of every BSDF on the lanes it did not shade reach it with none, and return
+    zeros untraced (``shaded_elsewhere``); they traced its shading twice more."""
+    import tomllib
+    from arches_render.materials.triplanar import TriplanarBSDF
+    desc = parse_scene(tomllib.loads(MINI), SCENES / "mini.toml")
+    scene = build_scene(desc, geometry, 48, 30)
+    before = render_image(scene, 2, seed=1)
+    shade, calls = TriplanarBSDF.shade, []
+
+    def counted(self, *args, **kwargs):
+        calls.append(self)
+        return shade(self, *args, **kwargs)
+    monkeypatch.setattr(TriplanarBSDF, "shade", counted)
+    assert np.array_equal(render_image(scene, 2, seed=1), before)
+    assert len(calls) == 1
+
+
 def test_changing_parameters_does_not_recompile():
     import tomllib
     desc = parse_scene(tomllib.loads(MINI), SCENES / "mini.toml")

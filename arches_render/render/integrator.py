@@ -505,7 +505,8 @@ class _ImplicitPathImpl:
 
     @property
     def shades_once(self):
-        """Whether :attr:`shaded_bsdf` can shade a vertex once for all its queries (``shade``)."""
+        """Whether :attr:`shaded_bsdf` can shade a vertex once for all its queries (``shade``,
+        and ``shaded_elsewhere`` for the calls on the other lanes)."""
         return hasattr(self.shaded_bsdf, "shade")
 
     def eval_pdf(self, bsdf, shading, shaded, ctx, si, wo, active):
@@ -513,7 +514,8 @@ class _ImplicitPathImpl:
         if shading is None:
             return bsdf.eval_pdf(ctx, si, wo, active)
         vf, pf = self.shaded_bsdf.eval_pdf(ctx, si, wo, active & shaded, shading)
-        vm, pm = bsdf.eval_pdf(ctx, si, wo, active & ~shaded)
+        with self.shaded_bsdf.shaded_elsewhere():
+            vm, pm = bsdf.eval_pdf(ctx, si, wo, active & ~shaded)
         return dr.select(shaded, vf, vm), dr.select(shaded, pf, pm)
 
     def sample_bsdf(self, bsdf, shading, shaded, ctx, si, sample1, sample2, active):
@@ -521,7 +523,8 @@ class _ImplicitPathImpl:
         if shading is None:
             return bsdf.sample(ctx, si, sample1, sample2, active)
         bf, wf = self.shaded_bsdf.sample(ctx, si, sample1, sample2, active & shaded, shading)
-        bm, wm = bsdf.sample(ctx, si, sample1, sample2, active & ~shaded)
+        with self.shaded_bsdf.shaded_elsewhere():
+            bm, wm = bsdf.sample(ctx, si, sample1, sample2, active & ~shaded)
         return dr.select(shaded, bf, bm), dr.select(shaded, wf, wm)
 
     def record_aovs(self, scene, ray, si, field_hit, res, tr, first, old, shading=None, shaded=None):
