@@ -58,173 +58,25 @@ Proceedings of SIGGRAPH 94, 239–246.
 from __future__ import annotations
 
 import contextlib
-import math
-import re
-from dataclasses import dataclass, fields
 
 import drjit as dr
 import mitsuba as mi
 
 from ..backend import variant_class
 from . import masks as M
-from .detail import DETAIL_KEYS, Detail, footprint
+from .detail import Detail, footprint
 from .mipmap import position_hash
-from .textures import TEXTURE_DIR, TILINGS, load_texture, texture_path
+from .textures import TEXTURE_DIR, load_texture, texture_path
+from .triplanar_layers import (LAYER_FLOATS, MAX_LAYERS, SPACES, Layer, check_layer_values, colour, finite,
+                               layer_count, triplanar_dict)
 from .weights import band, blend_projections, composite_weights, projection_slots, smoothstep01, triplanar_weights
 
 __all__ = ["MAX_LAYERS", "TEXTURE_DIR", "STRUCTURAL", "Layer", "triplanar_dict", "texture_path", "register",
            "TriplanarBSDF"]
 
-MAX_LAYERS = 8
 OBJP_ATTRIBUTE = "vertex_objp"
 #: Integer properties that shape the kernels (an edit needs a new plugin, not a parameter edit).
 STRUCTURAL = ("layer_count", "detail_octaves", "strata_count", "strata_layer", "cavity_samples")
-
-# Stand-in for an unbounded rule: finite so that ``bound - x`` never meets
-# ``inf - inf`` in the coverage ramps, yet far beyond any terrain.
-_UNBOUNDED = 1e30
-
-# Per-layer property suffixes and their defaults (the rule defaults always hold).
-_LAYER_FLOATS = {
-    "roughness": 0.0, "scale": 1.0,
-    "height_min": -math.inf, "height_max": math.inf, "height_soft": 0.0,
-    "slope_min": -math.inf, "slope_max": math.inf, "slope_soft": 0.0,
-    "coverage": 1.0,
-}
-_LAYER_OTHER = {"texture": "", "tint": (1.0, 1.0, 1.0), "srgb": True, "normalize": True,
-                "name": "", "tiling": "histogram"}
-_GLOBAL_PROPS = {"layer_count", "sharpness", "space", "pixel_spread", *DETAIL_KEYS}
-_LAYER_KEY = re.compile(r"layer(\d+)_")
-_SPACES = ("world", "object")
-
-
-@dataclass
-class Layer:
-    """One paint layer of a :class:`TriplanarBSDF` (Python side of the flattened properties).
-
-    Parameters
-    ----------
-    texture : str
-        PNG file name inside ``materials/textures/`` or an absolute path;
-        ``''`` for a constant layer.
-    tint : tuple of 3 floats
-        Linear RGB multiplying the texture. With ``normalize`` it is the
-        layer's mean albedo.
-    roughness : float
-        Oren–Nayar ``sigma`` in radians, in ``[0, 1]``; 0 is Lambert.
-    scale : float
-        Metres per texture repeat (> 0).
-    height_min, height_max, height_soft : float
-        Full coverage for ``height_min <= p.z <= height_max``, fading to 0
-        over ``height_soft`` metres outside (smoothstep).
-    slope_min, slope_max, slope_soft : float
-        The same in degrees of the angle between ``n`` and ``+Z``.
-    coverage : float
-        Overall coverage multiplier in ``[0, 1]``.
-
-        The base layer (index 0) is always fully covered: its rules are ignored.
-    srgb : bool
-        Decode the texture from sRGB (colour); ``False`` for linear data.
-    normalize : bool
-        Divide the texture by its mean luminance, so ``tint`` sets the mean.
-    name : str
-        Label for presets, overrides and AOVs.
-    tiling : str
-        ``'histogram'`` (random tiles, histogram-preserving blend; the default),
-        ``'bands'`` (tiles offset along u only, for banded textures) or ``'repeat'``
-        (the plain repeat, which shows its period).
-    """
-
-    texture: str = ""
-    tint: tuple = (1.0, 1.0, 1.0)
-    roughness: float = 0.0
-    scale: float = 1.0
-    height_min: float = -math.inf
-    height_max: float = math.inf
-    height_soft: float = 0.0
-    slope_min: float = -math.inf
-    slope_max: float = math.inf
-    slope_soft: float = 0.0
-    coverage: float = 1.0
-    srgb: bool = True
-    normalize: bool = True
-    name: str = ""
-    tiling: str = "histogram"
-
-    def __post_init__(self):
-        self.tint = tuple(float(c) for c in self.tint)
-        if len(self.tint) != 3:
-            raise ValueError(f"Layer '{self.name}': tint needs 3 values, got {len(self.tint)}")
-        for key in _LAYER_FLOATS:
-            setattr(self, key, float(getattr(self, key)))
-        _check_layer_values(self.name or "?", self.roughness, self.scale, self.coverage,
-                            self.height_soft, self.slope_soft)
-        if self.tiling not in TILINGS:
-            raise ValueError(f"Layer '{self.name}': tiling '{self.tiling}' is not one of {', '.join(TILINGS)}")
-
-
-def _check_layer_values(label, roughness, scale, coverage, height_soft, slope_soft):
-    if not 0.0 <= roughness <= 1.0:
-        raise ValueError(f"layer {label}: roughness {roughness} is outside [0, 1]")
-    if not scale > 0.0:
-        raise ValueError(f"layer {label}: scale {scale} must be > 0 (metres per repeat)")
-    if not 0.0 <= coverage <= 1.0:
-        raise ValueError(f"layer {label}: coverage {coverage} is outside [0, 1]")
-    if height_soft < 0.0 or slope_soft < 0.0:
-        raise ValueError(f"layer {label}: height_soft/slope_soft must be >= 0")
-
-
-def triplanar_dict(layers, sharpness: float = 8.0, space: str = "world", **extra) -> dict:
-    """Flattened plugin dictionary of a triplanar material for :func:`mitsuba.load_dict`.
-
-    Parameters
-    ----------
-    layers : sequence of Layer
-        Bottom (base) layer first; at most :data:`MAX_LAYERS`.
-    sharpness : float
-        Exponent of the projection blend (8 in the Arches paper).
-    space : str
-        ``'world'`` or ``'object'`` (positions from the ``vertex_objp`` mesh attribute).
-    **extra
-        Further plugin properties: ``detail_*``, ``strata_*``, ``cavity*``,
-        ``wet*``, ``pixel_spread`` (see the module docstring).
-
-    Returns
-    -------
-    dict
-        ``{'type': 'triplanar', 'layer_count': n, 'layer0_tint': [...], ...}``.
-
-    Raises
-    ------
-    ValueError
-        On an empty or too long layer list or an unknown space.
-    """
-    layers = list(layers)
-    if not 1 <= len(layers) <= MAX_LAYERS:
-        raise ValueError(f"triplanar: {len(layers)} layers given, allowed 1..{MAX_LAYERS}")
-    if space not in _SPACES:
-        raise ValueError(f"triplanar: unknown space '{space}', allowed: {', '.join(_SPACES)}")
-    d = {"type": "triplanar", "layer_count": len(layers), "sharpness": float(sharpness),
-         "space": space, **extra}
-    for i, layer in enumerate(layers):
-        for f in fields(Layer):
-            value = getattr(layer, f.name)
-            d[f"layer{i}_{f.name}"] = list(value) if f.name == "tint" else value
-    return d
-
-
-def _finite(x: float) -> float:
-    return float(min(max(x, -_UNBOUNDED), _UNBOUNDED))
-
-
-def _colour(value, key):
-    try:
-        c = [float(v) for v in value]
-    except TypeError:
-        c = [float(value)] * 3
-    if len(c) != 3:
-        raise ValueError(f"triplanar: {key} needs 3 values, got {len(c)}")
-    return c
 
 
 def _opaque(value, kind):
@@ -247,36 +99,24 @@ class _TriplanarImpl:
 
     def __init__(self, props):
         mi.BSDF.__init__(self, props)
-        names = set(props.keys())
-        # Without layer_count, the highest layer index named decides.
-        indices = [int(m.group(1)) for m in map(_LAYER_KEY.match, names) if m]
-        count = int(props.get("layer_count", 1 + max(indices, default=0)))
-        if not 1 <= count <= MAX_LAYERS:
-            raise ValueError(f"triplanar: layer_count {count} is outside 1..{MAX_LAYERS}")
-        allowed = set(_GLOBAL_PROPS) | M.look_keys(names) | {
-            f"layer{i}_{k}" for i in range(count) for k in (*_LAYER_FLOATS, *_LAYER_OTHER)}
-        unknown = sorted(names - allowed)
-        if unknown:
-            raise ValueError(f"triplanar: unknown properties {unknown}; per layer i < {count}: "
-                             f"layer{{i}}_{{{', '.join((*_LAYER_FLOATS, *_LAYER_OTHER))}}}, "
-                             f"global: {', '.join(sorted(_GLOBAL_PROPS))}, strata*, cavity*, wet*")
+        count = layer_count(props, M.look_keys)
         self.space = str(props.get("space", "world"))
-        if self.space not in _SPACES:
+        if self.space not in SPACES:
             raise ValueError(f"triplanar: unknown space '{self.space}', allowed: "
-                             f"{', '.join(_SPACES)}")
+                             f"{', '.join(SPACES)}")
         self.sharpness = _opaque(float(props.get("sharpness", 8.0)), mi.Float)
         self.pixel_spread = _opaque(float(props.get("pixel_spread", 0.0)), mi.Float)
         self.layer_count = count
         self.names, self.textures, self.tint, self.masks = [], [], [], [None] * count
-        self.params = {k: [] for k in _LAYER_FLOATS}
+        self.params = {k: [] for k in LAYER_FLOATS}
         for i in range(count):
             get = lambda k, d: props.get(f"layer{i}_{k}", d)  # noqa: E731
-            vals = {k: float(get(k, d)) for k, d in _LAYER_FLOATS.items()}
-            _check_layer_values(i, vals["roughness"], vals["scale"], vals["coverage"],
+            vals = {k: float(get(k, d)) for k, d in LAYER_FLOATS.items()}
+            check_layer_values(i, vals["roughness"], vals["scale"], vals["coverage"],
                                 vals["height_soft"], vals["slope_soft"])
             for k, v in vals.items():
-                self.params[k].append(_opaque(_finite(v), mi.Float))
-            self.tint.append(_opaque(_colour(get("tint", (1.0, 1.0, 1.0)), f"layer{i}_tint"),
+                self.params[k].append(_opaque(finite(v), mi.Float))
+            self.tint.append(_opaque(colour(get("tint", (1.0, 1.0, 1.0)), f"layer{i}_tint"),
                                      mi.Color3f))
             name, srgb, norm = str(get("texture", "")), get("srgb", True), get("normalize", True)
             tiling = str(get("tiling", "histogram"))
@@ -571,7 +411,7 @@ class _TriplanarImpl:
         differentiable = ("roughness", "coverage")
         for i in range(self.layer_count):
             callback.put(f"layer{i}_tint", self.tint[i], 0)
-            for k in _LAYER_FLOATS:
+            for k in LAYER_FLOATS:
                 flags = 0 if k in differentiable else mi.ParamFlags.NonDifferentiable
                 callback.put(f"layer{i}_{k}", self.params[k][i], flags)
             if self.masks[i] is not None:
