@@ -66,7 +66,7 @@ import numpy as np
 
 from ..imaging.compare import LUMINANCE_WEIGHTS
 
-__all__ = ["BASE_LAYERS", "MOMENT_CHANNELS", "DEPTH_CHANNEL", "second_moments", "RAY_COUNT_KINDS",
+__all__ = ["BASE_LAYERS", "MOMENT_CHANNELS", "DEPTH_CHANNEL", "second_moments", "RAY_COUNT_KINDS", "count_rays",
            "ray_count_header", "ATMOSPHERE_LAYERS", "aov_channel_names", "primary_aovs", "split_channels",
            "layer_names_of"]
 
@@ -236,3 +236,17 @@ def ray_count_header(layers: dict, spp: int) -> dict:
         for i, kind in enumerate(letters):
             out[f"rays_{layer}_{kind}"] = int(round(float(arr[..., i].sum()) * int(spp)))
     return out
+
+
+def count_rays(counts, results, lanes, kinds):
+    """Add the lanes ``lanes[i]`` of the queries ``results[i]`` to the ``exhausted`` and
+    ``unresolved`` counters of ray kind ``kinds[i]`` (an index of ``RAY_COUNT_KINDS``);
+    ``counts`` is ``()`` when nothing is counted."""
+    if not counts:
+        return counts
+    n = len(RAY_COUNT_KINDS)
+    out = list(counts)
+    for res, lane, kind in zip(results, lanes, kinds):
+        out[kind] = out[kind] + dr.select(lane & res.exhausted, 1.0, 0.0)
+        out[n + kind] = out[n + kind] + dr.select(lane & res.unresolved, 1.0, 0.0)
+    return tuple(out)

@@ -70,7 +70,8 @@ import drjit as dr
 import mitsuba as mi
 
 from ..backend import variant_class
-from .aovs import DEPTH_CHANNEL, MOMENT_CHANNELS, RAY_COUNT_KINDS, aov_channel_names, primary_aovs, second_moments
+from .aovs import (DEPTH_CHANNEL, MOMENT_CHANNELS, RAY_COUNT_KINDS, aov_channel_names, count_rays, primary_aovs,
+                   second_moments)
 from .heightfield_caster import make_tracer
 from .march import position_ulps
 from .path_state import PathState
@@ -569,20 +570,6 @@ class _ImplicitPathImpl:
     def to_string(self):
         return (f"ImplicitPathIntegrator[max_depth={self.max_depth}, rr_depth={self.rr_depth}, "
                 f"field={'attached' if self.tracer else 'none'}]")
-
-
-def count_rays(counts, results, lanes, kinds):
-    """Add the lanes ``lanes[i]`` of the queries ``results[i]`` to the ``exhausted`` and
-    ``unresolved`` counters of ray kind ``kinds[i]`` (an index of ``RAY_COUNT_KINDS``);
-    ``counts`` is ``()`` when nothing is counted."""
-    if not counts:
-        return counts
-    n = len(RAY_COUNT_KINDS)
-    out = list(counts)
-    for res, lane, kind in zip(results, lanes, kinds):
-        out[kind] = out[kind] + dr.select(lane & res.exhausted, 1.0, 0.0)
-        out[n + kind] = out[n + kind] + dr.select(lane & res.unresolved, 1.0, 0.0)
-    return tuple(out)
 
 
 def integrator_class():
