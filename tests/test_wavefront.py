@@ -130,3 +130,30 @@ def test_wavefront_passes_hold_at_most_its_lanes():
     desc.render.wavefront = True
     assert pass_limit(build_scene(desc, "field", 1280, 720)) == max(1, WAVEFRONT_LANES // (1280 * 720))
     assert pass_limit(build_scene(desc, "field", 64, 36)) == WAVEFRONT_LANES // (64 * 36)
+
+
+def test_a_wavefront_depth_computes_nothing_twice():
+    """The wavefront's kernels, depth for depth, hold no more operations than the
+    megakernel (which computes each value once): what a vertex computes before its
+    shadow query and reads after it is kept, not computed again (the material's shading
+    and the normal's taps were, a third more work a depth on the arch bridge)."""
+    from arches_render.render import integrator as integrator_module
+    from arches_render.render.renderer import build_scene, render_image
+    from arches_render.scene import load_scene
+    from arches_render.timing import REPO
+    desc = load_scene(REPO / "scenes" / "gallery" / "fig23_arch_bridge.toml")
+    ops = {}
+    for wavefront in (False, True):
+        desc.render.wavefront = wavefront
+        scene = build_scene(desc, "field", 48, 27)
+        render_image(scene, 1, seed=1)  # (kernels compiled, not counted)
+        dr.set_flag(dr.JitFlag.KernelHistory, True)
+        try:
+            render_image(scene, 1, seed=2)
+        finally:
+            history = dr.kernel_history()
+            dr.set_flag(dr.JitFlag.KernelHistory, False)
+        ops[wavefront] = sum(k["operation_count"] for k in history if k["type"] == dr.KernelType.JIT)
+    depths = scene.integrator().max_depth
+    assert depths == 3
+    assert ops[True] <= depths * ops[False], (ops, depths)

@@ -365,6 +365,13 @@ class _ImplicitPathImpl:
                                                               clear, active_next)
         bs, bsdf_weight = self.sample_bsdf(bsdf, shading, shaded, ctx, si, sampler.next_1d(),
                                            sampler.next_2d(), active_next)
+        # A wavefront's shadow query is a kernel of its own, and Dr.Jit evaluates only what
+        # is scheduled: what the vertex reads past it (the hit's frame, the BSDF sample,
+        # the shading they came from) would be computed again after it, the material and
+        # the normal's four taps twice (goblins: 44k operations a depth, 31k once).
+        if not dr.flag(dr.JitFlag.SymbolicScope):  # (a megakernel is one kernel)
+            dr.schedule(si, shading, bs, bsdf_weight, shadow, lanes, added, added_clear, hit_cone, active_next,
+                        L, beta, clear, aov, counts)
         L, clear, counts = self.shadow_test(scene, shadow, lanes, added, added_clear, hit_cone, L, clear, counts)
         valid = path.valid | (active & si.is_valid())
         beta = beta * bsdf_weight
