@@ -100,7 +100,7 @@ def test_the_wavefront_renders_the_megakernels_picture(scene):
     from arches_render.scene import load_scene
     from arches_render.timing import REPO
     desc = load_scene(REPO / "scenes" / "gallery" / f"{scene}.toml")
-    desc.render.wavefront = False  # (the goblins' scene asks for the wavefront)
+    desc.render.wavefront = False  # (both scenes ask for the wavefront)
     mega = build_scene(desc, "field", 48, 27, aovs=True)
     desc.render.wavefront = True
     wave = build_scene(desc, "field", 48, 27, aovs=True)
@@ -126,6 +126,7 @@ def test_wavefront_passes_hold_at_most_its_lanes():
     assert plan_passes(32, 0, 3) == [3] * 10 + [2]
     assert plan_passes(5, 0, 8) == [5]
     desc = load_scene(REPO / "scenes" / "gallery" / "fig23_arch_bridge.toml")
+    desc.render.wavefront = False  # (the arch bridge's scene asks for the wavefront)
     assert pass_limit(build_scene(desc, "field", 64, 36)) == 0
     desc.render.wavefront = True
     assert pass_limit(build_scene(desc, "field", 1280, 720)) == max(1, WAVEFRONT_LANES // (1280 * 720))

@@ -15,13 +15,18 @@ render's passes may differ: a wavefront pass holds at most ``WAVEFRONT_LANES`` p
 own seeds.)
 
 Cost. Each query splits a depth's kernel in two and the state live across it goes
-through memory: on a field cheap to march (a heightfield, a few carving spheres) that
-costs more than the full packets save. Field renders at 160x90, 8 spp, against the
-megakernel: goblins -16 % (-27 % at 640x360), the arch bridge -9 %, the sea cliffs,
-karst, canyon overhangs, floating islands and every_generator +15-45 %. So it is a
-scene's choice (``[render] wavefront``), off by default; the goblins' gallery scene
-takes it. With the queue off (plain marches over compacted paths) the kernels took what
-the megakernel's took: the gain is the queue's.
+through memory (what the vertex computed before its shadow query and reads after it
+is scheduled with the query's rays: :meth:`~.integrator.ImplicitPathIntegrator.path_vertex`);
+on a field cheap to march (a heightfield, a few carving spheres) that costs more than
+the full packets save. Field renders at 160x90, 8 spp, every camera, against the
+megakernel (with the queue's 1,024 lanes, :mod:`.ray_queue`): goblins -33 %, the arch
+bridge -24 %, every_generator -11 to -16 %, karst -13 to +2 %, the coastal cliff and
+the sea cliffs +2 to +30 %, canyon overhangs +27 %, floating islands +44 %. So it is a
+scene's choice (``[render] wavefront``), off by default; the goblins', the arch
+bridge's and every_generator's gallery scenes take it. With the queue off (plain
+marches over compacted paths) the kernels took what the megakernel's took: the gain
+is the queue's.
+
 References
 ----------
 Laine, S., Karras, T., Aila, T. (2013). Megakernels considered harmful: wavefront path
