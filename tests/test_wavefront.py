@@ -158,3 +158,19 @@ def test_a_wavefront_depth_computes_nothing_twice():
     depths = scene.integrator().max_depth
     assert depths == 3
     assert ops[True] <= depths * ops[False], (ops, depths)
+
+
+def test_the_queue_gives_every_thread_packets_and_takes_most_rays_from_the_queue():
+    """On the CPU a queued march has a few packets a thread (fewer leave threads idle)
+    and not many more (a lane's first ray is its own, marched in a plain packet): its
+    lanes grow with Dr.Jit's threads; a GPU's fill it."""
+    from arches_render.render.ray_queue import CUDA_QUEUE_LANES, queue_lanes
+    threads = dr.thread_count()
+    try:
+        for n in (1, 2, 16, 128):
+            dr.set_thread_count(n)
+            lanes = queue_lanes(dr.JitBackend.LLVM)
+            assert 16 * 8 * n <= lanes <= 16 * 64 * n, (n, lanes)
+    finally:
+        dr.set_thread_count(threads)
+    assert queue_lanes(dr.JitBackend.CUDA) == CUDA_QUEUE_LANES >= 1 << 17

@@ -24,12 +24,12 @@ thread, each to the end of its loop, and each lane starts with the ray of its ow
 index. So the first packet of each thread drains the queue, and every other packet
 then marches only the 16 rays it started with, as the plain march does, its slowest
 ray setting its time. With 16,384 lanes that was 31 % of the goblins' 52,800 shadow
-rays of a 480x270 view; with 1,024 lanes it is 2 % (the queue alone: 139 -> 105 ms;
-122,061 bounce rays: 284 -> 252 ms; camera rays, coherent already, 239 -> 240 ms;
-160x90, 8 spp renders, every camera: goblins -17 %, every_generator and the arch
-bridge -10 %). 256 lanes ran as 1,024; 16 lanes (one packet) leave one of the two
-threads idle. A GPU runs all its lanes at once and needs many: there the queue keeps
-``CUDA_QUEUE_LANES``.
+rays of a 480x270 view; with 1,024 lanes (512 a thread, 2 threads) it is 2 % (the
+queue alone: 139 -> 105 ms; 122,061 bounce rays: 284 -> 252 ms; camera rays, coherent
+already, 239 -> 240 ms; 160x90, 8 spp renders, every camera: goblins -17 %,
+every_generator and the arch bridge -10 %). 256 and 512 lanes ran as 1,024; 16 lanes (one packet) left one of the
+two threads idle, so the lanes grow with the threads. A GPU runs all its lanes at
+once and needs many: there the queue keeps ``CUDA_QUEUE_LANES``.
 
 References
 ----------
@@ -46,13 +46,21 @@ import mitsuba as mi
 
 from .march import SECOND_PASS_FACTOR, March, ShadowProbe, TraceResult
 
-__all__ = ["CUDA_QUEUE_LANES", "QUEUE_LANES", "queued_march"]
+__all__ = ["CUDA_QUEUE_LANES", "QUEUE_LANES_PER_THREAD", "queue_lanes", "queued_march"]
 
-#: Lanes of a queued march on the CPU (at most): few, so that nearly every ray is
-#: taken from the queue by a packet that stays full (module docstring, "Lanes").
-QUEUE_LANES = 1024
+#: Lanes of a queued march on the CPU, per thread of Dr.Jit's pool (at most): few, so
+#: that nearly every ray is taken from the queue by a packet that stays full, and 32
+#: packets a thread, so that every thread has some (module docstring, "Lanes").
+QUEUE_LANES_PER_THREAD = 512
 #: On a GPU, whose lanes all run at once: enough to fill it.
 CUDA_QUEUE_LANES = 1 << 18
+
+
+def queue_lanes(backend):
+    """Lanes of a queued march on ``backend`` (a ``dr.JitBackend``), at most."""
+    if backend == dr.JitBackend.CUDA:
+        return CUDA_QUEUE_LANES
+    return QUEUE_LANES_PER_THREAD * max(1, dr.thread_count())
 
 
 def _gather3(cls, source, index, active):
@@ -80,7 +88,7 @@ def queued_march(tracer, o, d, t_start, t_end, active, cone=None, any_hit=False,
     any_hit : bool
         Shadow rays (probes, :mod:`.march`).
     lanes : int, optional
-        Lanes at most (default: ``QUEUE_LANES``, ``CUDA_QUEUE_LANES`` on a GPU).
+        Lanes at most (default: :func:`queue_lanes`).
 
     Returns
     -------
@@ -97,7 +105,7 @@ def queued_march(tracer, o, d, t_start, t_end, active, cone=None, any_hit=False,
     t_out, steps_out = mi.Float(t_start), dr.zeros(mi.UInt32, width)
     if count > 0:
         if lanes is None:
-            lanes = CUDA_QUEUE_LANES if dr.backend_v(t_start) == dr.JitBackend.CUDA else QUEUE_LANES
+            lanes = queue_lanes(dr.backend_v(t_start))
         n = min(count, lanes)
         # Counts as opaque values: literals would make a kernel for every count.
         queue = dr.opaque(mi.UInt32, n, 1)  # the next ray's place in ``rays``
