@@ -174,3 +174,29 @@ def test_the_queue_gives_every_thread_packets_and_takes_most_rays_from_the_queue
     finally:
         dr.set_thread_count(threads)
     assert queue_lanes(dr.JitBackend.CUDA) == CUDA_QUEUE_LANES >= 1 << 17
+
+
+def test_the_wavefront_marches_camera_rays_in_plain_packets():
+    """The first depth's camera rays travel together and are marched in plain packets
+    (a queue would mix them); every shadow and bounce query takes the queue."""
+    from arches_render.render.renderer import build_scene, render_image
+    from arches_render.scene import load_scene
+    from arches_render.timing import REPO
+    desc = load_scene(REPO / "scenes" / "gallery" / "fig23_goblins.toml")
+    scene = build_scene(desc, "field", 32, 18)
+    tracer = scene.integrator().tracer
+    assert scene.integrator().wavefront and tracer.queued
+    calls = []
+    plain, queued = tracer._march, tracer._queued
+
+    def counted(kind, march):
+        def call(o, d, t_start, t_end, active, cone, any_hit=False):
+            calls.append((kind, "shadow" if any_hit else "closest", dr.width(t_start)))
+            return march(o, d, t_start, t_end, active, cone, any_hit)
+        return call
+
+    tracer._march, tracer._queued = counted("plain", plain), counted("queue", queued)
+    render_image(scene, 2, seed=1)
+    assert calls[0] == ("plain", "closest", 32 * 18 * 2)
+    assert [c[0] for c in calls[1:]] == ["queue"] * (len(calls) - 1)
+    assert {c[1] for c in calls[1:]} == {"shadow", "closest"}  # shadow and bounce rays

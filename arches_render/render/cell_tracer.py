@@ -75,8 +75,9 @@ class CellTracer:
         self._leaf = dr.opaque(mi.Float, leaf)
 
     # -- public queries ------------------------------------------------------------
-    def query(self, o, d, tmax, active, cone=None, any_hit=False):
-        """First hits (:meth:`SphereTracer.query`; ``cells``: the cells jumped over)."""
+    def query(self, o, d, tmax, active, cone=None, any_hit=False, coherent=False):
+        """First hits (:meth:`SphereTracer.query`; ``cells``: the cells jumped over;
+        ``coherent`` changes nothing: no queue)."""
         t_in, t_out = ray_box(o, d, self.sphere.lo_op, self.sphere.hi_op)
         t_start = dr.maximum(t_in, 0.0)
         t_end = dr.minimum(t_out, tmax)

@@ -117,9 +117,10 @@ class HeightfieldCaster:
             self._min_cast = dr.opaque(mi.Float, 0.125 * self.far_level)
 
     # -- public queries ------------------------------------------------------------
-    def query(self, o, d, tmax, active, cone=None, any_hit=False):
+    def query(self, o, d, tmax, active, cone=None, any_hit=False, coherent=False):
         """Ray queries with step counts and budgets (:meth:`SphereTracer.query`);
-        ``any_hit``: stop at the first certain hit (shadow rays).
+        ``any_hit``: stop at the first certain hit (shadow rays); ``coherent`` changes
+        nothing (no queue).
 
         Returns
         -------

@@ -212,7 +212,7 @@ class _ImplicitPathImpl:
             return None
         return mi.Float(0.0), mi.Float(0.5 * self.pixel_angle)
 
-    def intersect(self, scene, ray, active, cone=None):
+    def intersect(self, scene, ray, active, cone=None, coherent=False):
         """Nearest hit among meshes and the field.
 
         Parameters
@@ -221,6 +221,8 @@ class _ImplicitPathImpl:
             The scene, the rays and their lanes.
         cone : (mi.Float, mi.Float), optional
             The rays' cones (module docstring).
+        coherent : bool
+            Camera rays (:meth:`.SphereTracer.query`).
 
         Returns
         -------
@@ -233,7 +235,7 @@ class _ImplicitPathImpl:
         if self.tracer is None:
             return facing_shading_frame(si, ray.d), mi.Bool(False), None
         tmax = dr.select(si.is_valid(), si.t, ray.maxt)
-        res = self.tracer.query(ray.o, ray.d, tmax, active, cone)
+        res = self.tracer.query(ray.o, ray.d, tmax, active, cone, coherent=coherent)
         hit, t = res.hit, res.t
         # Normals (four gradient taps and a value) only where the field was hit:
         # packets without such a lane skip them.
@@ -333,14 +335,15 @@ class _ImplicitPathImpl:
                     path = self.path_vertex(scene, sampler, ctx, path)
         return path.L, path.valid, self.outputs(path.L, path.aov, path.clear, path.counts)
 
-    def path_vertex(self, scene, sampler, ctx, path):
+    def path_vertex(self, scene, sampler, ctx, path, coherent=False):
         """One vertex of the paths ``path`` (a :class:`~.path_state.PathState`): the ray's
         hit, its fog, emission reached by BSDF sampling, next-event estimation, the BSDF
-        sample and Russian roulette; the state after it."""
+        sample and Russian roulette; the state after it (``coherent``: every ray a
+        camera ray, :meth:`intersect`)."""
         ray, cone, active, depth = path.ray, path.cone, path.active, path.depth
         L, beta, clear, aov, counts = path.L, path.beta, path.clear, path.aov, path.counts
         primary = depth == 0  # lanes whose ray left the camera (a miss ends a path)
-        si, field_hit, res = self.intersect(scene, ray, active, cone or None)
+        si, field_hit, res = self.intersect(scene, ray, active, cone or None, coherent)
         # The cone at the hit: shadow rays keep its spread, bounces widen it.
         hit_cone = (cone[0] + cone[1] * dr.select(si.is_valid(), si.t, 0.0), cone[1]) if cone else ()
         L, beta, clear, tr = self.fog_segment(ray, si, L, beta, clear, active)

@@ -122,8 +122,10 @@ def wavefront_sample(integ, scene, sampler, ray, active=True):
     dr.eval(done)
     lanes = dr.compress(active)
     path = take(done, lanes)
+    camera = True  # the first depth's rays: camera rays, marched in plain packets
     while dr.width(lanes) > 0:
-        path = integ.path_vertex(scene, LaneSampler(sampler, lanes), ctx, path)
+        path = integ.path_vertex(scene, LaneSampler(sampler, lanes), ctx, path, coherent=camera)
+        camera = False
         _put((done.L, done.valid, done.clear, done.aov, done.counts),
              (path.L, path.valid, path.clear, path.aov, path.counts), lanes)
         dr.eval(done, path)
