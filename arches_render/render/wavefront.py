@@ -3,9 +3,11 @@
 Why. In Mitsuba's megakernel a SIMD packet of 16 paths marches each of its field
 queries until its slowest ray is done, and a shadow or bounce ray's packet took 1.7-2.2
 times the steps of its mean ray (goblins, 320x180). Here the path loop runs depth by
-depth in Python: each depth's field queries are marched by persistent lanes that take
-the next ray from a queue (:mod:`.ray_queue`), and between depths the paths still
-alive are gathered into compact arrays, so that no stage runs on dead lanes. Every
+depth in Python: its shadow and bounce queries are marched by persistent lanes that
+take the next ray from a queue (:mod:`.ray_queue`; the camera rays, which march
+alike, in plain packets: :meth:`~.sphere_tracer.SphereTracer.query`), and between
+depths the paths still alive are gathered into compact arrays, so that no stage runs
+on dead lanes. Every
 depth runs the megakernel's own vertex
 (:meth:`~.integrator.ImplicitPathIntegrator.path_vertex` on a
 :class:`~.path_state.PathState`), fed the same random numbers in the same order
