@@ -75,11 +75,11 @@ class CellTracer:
         self._leaf = dr.opaque(mi.Float, leaf)
 
     # -- public queries ------------------------------------------------------------
-    def query(self, o, d, tmax, active, cone=None, any_hit=False, coherent=False):
+    def query(self, o, d, tmax, active, cone=None, any_hit=False, coherent=False, t_min=None):
         """First hits (:meth:`SphereTracer.query`; ``cells``: the cells jumped over;
         ``coherent`` changes nothing: no queue)."""
         t_in, t_out = ray_box(o, d, self.sphere.lo_op, self.sphere.hi_op)
-        t_start = dr.maximum(t_in, 0.0)
+        t_start = dr.maximum(t_in, 0.0) if t_min is None else dr.maximum(dr.maximum(t_in, 0.0), t_min)
         t_end = dr.minimum(t_out, tmax)
         active = mi.Bool(active) & (t_start <= t_end)
         o, d = mi.Point3f(o), mi.Vector3f(d)

@@ -117,10 +117,10 @@ class HeightfieldCaster:
             self._min_cast = dr.opaque(mi.Float, 0.125 * self.far_level)
 
     # -- public queries ------------------------------------------------------------
-    def query(self, o, d, tmax, active, cone=None, any_hit=False, coherent=False):
+    def query(self, o, d, tmax, active, cone=None, any_hit=False, coherent=False, t_min=None):
         """Ray queries with step counts and budgets (:meth:`SphereTracer.query`);
-        ``any_hit``: stop at the first certain hit (shadow rays); ``coherent`` changes
-        nothing (no queue).
+        ``any_hit``: stop at the first certain hit (shadow rays); ``coherent`` and
+        ``t_min`` change nothing (no queue; a cast does not start at a proven distance).
 
         Returns
         -------

@@ -212,7 +212,7 @@ class _ImplicitPathImpl:
             return None
         return mi.Float(0.0), mi.Float(0.5 * self.pixel_angle)
 
-    def intersect(self, scene, ray, active, cone=None, coherent=False):
+    def intersect(self, scene, ray, active, cone=None, coherent=False, t_min=None):
         """Nearest hit among meshes and the field.
 
         Parameters
@@ -223,6 +223,8 @@ class _ImplicitPathImpl:
             The rays' cones (module docstring).
         coherent : bool
             Camera rays (:meth:`.SphereTracer.query`).
+        t_min : mi.Float, optional
+            Where the field's query may start (:meth:`camera_starts`).
 
         Returns
         -------
@@ -235,7 +237,7 @@ class _ImplicitPathImpl:
         if self.tracer is None:
             return facing_shading_frame(si, ray.d), mi.Bool(False), None
         tmax = dr.select(si.is_valid(), si.t, ray.maxt)
-        res = self.tracer.query(ray.o, ray.d, tmax, active, cone, coherent=coherent)
+        res = self.tracer.query(ray.o, ray.d, tmax, active, cone, coherent=coherent, t_min=t_min)
         hit, t = res.hit, res.t
         # Normals (four gradient taps and a value) only where the field was hit:
         # packets without such a lane skip them.
@@ -314,6 +316,15 @@ class _ImplicitPathImpl:
                                self.atmosphere is not None and self.aovs, aov,
                                2 * len(RAY_COUNT_KINDS) if aov and self.tracer else 0, width)
 
+    def camera_starts(self, path):
+        """Where the camera rays of ``path`` (a :class:`~.path_state.PathState` as
+        :meth:`start_paths` made it) may start their field queries, marched in bundles
+        (:mod:`.ray_bundles`); None when the tracer does not bundle (casts, meshes)."""
+        if not hasattr(self.tracer, "bundle_starts"):
+            return None
+        ray = path.ray
+        return self.tracer.bundle_starts(ray.o, ray.d, ray.maxt, path.active, path.cone or None)
+
     @dr.syntax
     def sample_megakernel(self, scene, sampler, ray, active=True):
         """:meth:`sample` as one symbolic loop over :meth:`path_vertex`.
@@ -329,21 +340,24 @@ class _ImplicitPathImpl:
         loops inside. ``tests/test_render.py`` checks that each body is traced once."""
         ctx = mi.BSDFContext()
         path = self.start_paths(sampler, ray, active)
+        t_min = self.camera_starts(path)
         with dr.scoped_set_flag(dr.JitFlag.OptimizeLoops, False):
-            while dr.hint(path.active, label="implicit_path", exclude=[self, scene, ctx]):
+            while dr.hint(path.active, label="implicit_path", exclude=[self, scene, ctx, t_min]):
                 with dr.scoped_set_flag(dr.JitFlag.OptimizeLoops, True):
-                    path = self.path_vertex(scene, sampler, ctx, path)
+                    path = self.path_vertex(scene, sampler, ctx, path, t_min=t_min)
         return path.L, path.valid, self.outputs(path.L, path.aov, path.clear, path.counts)
 
-    def path_vertex(self, scene, sampler, ctx, path, coherent=False):
+    def path_vertex(self, scene, sampler, ctx, path, coherent=False, t_min=None):
         """One vertex of the paths ``path`` (a :class:`~.path_state.PathState`): the ray's
         hit, its fog, emission reached by BSDF sampling, next-event estimation, the BSDF
         sample and Russian roulette; the state after it (``coherent``: every ray a
-        camera ray, :meth:`intersect`)."""
+        camera ray, :meth:`intersect`; ``t_min``: the camera rays' starts,
+        :meth:`camera_starts`)."""
         ray, cone, active, depth = path.ray, path.cone, path.active, path.depth
         L, beta, clear, aov, counts = path.L, path.beta, path.clear, path.aov, path.counts
         primary = depth == 0  # lanes whose ray left the camera (a miss ends a path)
-        si, field_hit, res = self.intersect(scene, ray, active, cone or None, coherent)
+        t_min = None if t_min is None else dr.select(primary, t_min, 0.0)
+        si, field_hit, res = self.intersect(scene, ray, active, cone or None, coherent, t_min)
         # The cone at the hit: shadow rays keep its spread, bounces widen it.
         hit_cone = (cone[0] + cone[1] * dr.select(si.is_valid(), si.t, 0.0), cone[1]) if cone else ()
         L, beta, clear, tr = self.fog_segment(ray, si, L, beta, clear, active)

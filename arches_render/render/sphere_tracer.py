@@ -35,6 +35,7 @@ from ..field.lod import Footprint
 from ..field.node import finite_box, one_sided, shading_normals
 from .march import (SECOND_PASS_FACTOR, March, ShadowProbe, march_result, position_ulps, ray_box, relaxed_step,
                     secant_probe)
+from .ray_bundles import bundle_starts
 from .ray_queue import queued_march
 from .sun_columns import SUN_HALF_ANGLE, SunColumns
 
@@ -110,7 +111,7 @@ class SphereTracer:
         """The :class:`~arches_render.field.lod.Footprint` of ``cone`` at ``t`` (None: none)."""
         return None if cone is None else Footprint.on_ray(cone[0], cone[1], t)
 
-    def query(self, o, d, tmax, active, cone=None, any_hit=False, coherent=False):
+    def query(self, o, d, tmax, active, cone=None, any_hit=False, coherent=False, t_min=None):
         """First hit of the rays ``o + t d`` (``|d| = 1``) with ``0 <= t <= tmax``, with
         the ray's step count and whether it used up its budgets.
 
@@ -144,13 +145,17 @@ class SphereTracer:
             samples, which march alike (wavefront renders, 160x90, 8 spp, every camera:
             floating islands 0.79 -> 0.52 s, every_generator 3.0 -> 2.4-2.6 s, the arch
             bridge 1.05-1.14 -> 0.92-1.03 s; goblins 1.55 -> 1.50 s).
+        t_min : mi.Float, optional
+            Where each ray may start: ``[0, t_min]`` is known to be free (camera rays
+            marched in bundles: :meth:`bundle_starts`); a ray whose segment ends before it
+            misses.
 
         Returns
         -------
         TraceResult
         """
         t_in, t_out = ray_box(o, d, self.lo_op, self.hi_op)
-        t_start = dr.maximum(t_in, 0.0)
+        t_start = dr.maximum(t_in, 0.0) if t_min is None else dr.maximum(dr.maximum(t_in, 0.0), t_min)
         t_end = dr.minimum(t_out, tmax)
         march = self._queued if self.queued and not coherent else self._march
         if not (any_hit and self.sun is not None):
@@ -213,6 +218,11 @@ class SphereTracer:
         if shadow is None:
             return new, out, r
         return new, out, r, shadow.after(out, f)
+
+    def bundle_starts(self, o, d, tmax, active, cone=None):
+        """Where camera rays ``o + t d`` may start (:func:`.ray_bundles.bundle_starts`):
+        the ``t_min`` of :meth:`query`."""
+        return bundle_starts(self, o, d, tmax, active, cone)
 
     def trace(self, o, d, tmax, active, cone=None):
         """``(hit, t)`` of :meth:`query` (unresolved rays count as hits)."""

@@ -121,12 +121,15 @@ def wavefront_sample(integ, scene, sampler, ray, active=True):
     active = mi.Bool(active) & dr.full(mi.Bool, True, width)
     # Every lane's outcome, written back as its path leaves the live set.
     done = integ.start_paths(sampler, ray, active, width)
-    dr.eval(done)
+    t_min = integ.camera_starts(done)
+    dr.eval(done, t_min)
     lanes = dr.compress(active)
     path = take(done, lanes)
+    t_min = take(t_min, lanes)
     camera = True  # the first depth's rays: camera rays, marched in plain packets
     while dr.width(lanes) > 0:
-        path = integ.path_vertex(scene, LaneSampler(sampler, lanes), ctx, path, coherent=camera)
+        path = integ.path_vertex(scene, LaneSampler(sampler, lanes), ctx, path, coherent=camera,
+                                 t_min=t_min if camera else None)
         camera = False
         _put((done.L, done.valid, done.clear, done.aov, done.counts),
              (path.L, path.valid, path.clear, path.aov, path.counts), lanes)
