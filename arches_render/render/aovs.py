@@ -67,8 +67,8 @@ import numpy as np
 from ..imaging.compare import LUMINANCE_WEIGHTS
 
 __all__ = ["BASE_LAYERS", "MOMENT_CHANNELS", "DEPTH_CHANNEL", "second_moments", "RAY_COUNT_KINDS", "count_rays",
-           "ray_count_header", "ATMOSPHERE_LAYERS", "aov_channel_names", "primary_aovs", "split_channels",
-           "layer_names_of"]
+           "ray_count_header", "ATMOSPHERE_LAYERS", "aov_channel_names", "primary_aovs", "first_vertex_aovs",
+           "split_channels", "layer_names_of"]
 
 #: Kinds of rays counted in the ``exhausted`` and ``unresolved`` layers (their channels).
 RAY_COUNT_KINDS = ("primary", "bounce", "shadow")
@@ -179,6 +179,61 @@ def primary_aovs(si, field_hit, valid, bsdf, field_bsdf=None, depth=None, steps=
     if layer_names_of(field_bsdf):
         out += [dr.select(on_field, w, zero) for w in field_bsdf.layer_weights(si, on_field)]
     return out
+
+
+def first_vertex_aovs(integ, scene, ray, si, field_hit, res, tr, first, old, shading=None, shaded=None):
+    """The AOV values of the camera rays' hits (lanes ``first``), in the order of
+    :func:`aov_channel_names`; ``old`` elsewhere (``()`` without AOVs).
+
+    Recorded at the path's first vertex, so no second primary trace is needed; packets
+    without a first-vertex lane skip the shading it takes.
+
+    Parameters
+    ----------
+    integ : ImplicitPathIntegrator
+        Its ``bsdf_at``, ``field_bsdf`` and ``tracer``.
+    scene : mi.Scene
+        The scene (its sensor: depth is measured from the camera's centre).
+    ray, si, field_hit
+        The camera rays, their hits and whether those are on the field.
+    res : TraceResult or None
+        The field query's result (its steps; None without a field).
+    tr : mi.Color3f or None
+        The camera segment's transmittance (None without an atmosphere).
+    first : mi.Bool
+        The lanes whose ray left the camera.
+    old : tuple of mi.Float
+        The channels so far.
+    shading, shaded : optional
+        The vertex's shading (``shade_vertex``) on the lanes ``shaded``, whose albedo
+        it reuses.
+
+    Returns
+    -------
+    tuple of mi.Float
+    """
+    if not old:
+        return old
+    steps = res.steps if res is not None else mi.UInt32(0)
+    albedo = None if shading is None else shading[0]
+    field_bsdf = integ.field_bsdf if integ.tracer else None
+    # Perspective cameras start rays on the near plane: measure depth from the
+    # camera centre instead, at the unlifted hit point.
+    centre = scene.sensors()[0].world_transform().translation()
+    extra = () if tr is None else (tr,)
+    known = () if albedo is None else (albedo, field_hit if shaded is None else shaded)
+
+    def compute(si, field_hit, steps, first, known, *extra):
+        valid = first & si.is_valid()
+        bsdf = integ.bsdf_at(si, ray, field_hit)
+        depth = dr.norm(ray.o + ray.d * si.t - centre)
+        out = primary_aovs(si, field_hit, valid, bsdf, field_bsdf, depth, mi.Float(steps), *known)
+        if extra:
+            out += [extra[0].x, extra[0].y, extra[0].z]
+        return tuple(dr.select(first, v, o) for v, o in zip(out, old))
+
+    return dr.if_stmt((si, field_hit, steps, first, known, *extra), first, compute,
+                      lambda *args: tuple(mi.Float(o) for o in old), label="first_vertex_aovs")
 
 
 def split_channels(image: np.ndarray, aov_names) -> tuple[np.ndarray, dict]:

@@ -70,8 +70,8 @@ import drjit as dr
 import mitsuba as mi
 
 from ..backend import variant_class
-from .aovs import (DEPTH_CHANNEL, MOMENT_CHANNELS, RAY_COUNT_KINDS, aov_channel_names, count_rays, primary_aovs,
-                   second_moments)
+from .aovs import (DEPTH_CHANNEL, MOMENT_CHANNELS, RAY_COUNT_KINDS, aov_channel_names, count_rays,
+                   first_vertex_aovs, second_moments)
 from .heightfield_caster import make_tracer
 from .march import position_ulps
 from .path_state import PathState
@@ -368,7 +368,7 @@ class _ImplicitPathImpl:
         shaded = self.shaded_lanes(bsdf, field_hit)
         shading = self.shade_vertex(si, shaded, active & (primary | (depth + 1 < self.max_depth)), primary,
                                     hit_cone)
-        aov = self.record_aovs(scene, ray, si, field_hit, res, tr, active & primary, aov, shading, shaded)
+        aov = first_vertex_aovs(self, scene, ray, si, field_hit, res, tr, active & primary, aov, shading, shaded)
         counts = count_rays(counts, (res, res), (active & primary, active & ~primary), (0, 1))
 
         # Emission reached by BSDF sampling (environment or area light), MIS-weighted.
@@ -522,7 +522,7 @@ class _ImplicitPathImpl:
         return out
 
     def primary_aov_count(self):
-        """Channels that :meth:`record_aovs` fills (all but the ray counts, ``beauty_clear``
+        """Channels that :func:`~.aovs.first_vertex_aovs` fills (all but the ray counts, ``beauty_clear``
         and ``moment2``)."""
         counted = 2 * len(RAY_COUNT_KINDS) if self.tracer is not None else 0
         later = (3 if self.atmosphere is not None else 0) + (len(MOMENT_CHANNELS) if self.moments else 0)
@@ -551,39 +551,6 @@ class _ImplicitPathImpl:
         with self.shaded_bsdf.shaded_elsewhere():
             bm, wm = bsdf.sample(ctx, si, sample1, sample2, active & ~shaded)
         return dr.select(shaded, bf, bm), dr.select(shaded, wf, wm)
-
-    def record_aovs(self, scene, ray, si, field_hit, res, tr, first, old, shading=None, shaded=None):
-        """The AOV values of the camera rays' hits (lanes ``first``), in the order of
-        :meth:`aov_names`; ``old`` elsewhere (``()`` without AOVs). ``res``: the field
-        query's :class:`~.march.TraceResult` (None without a field); ``tr``: the camera
-        segment's transmittance (None without an atmosphere); ``shading``: the
-        vertex's shading (:meth:`shade_vertex`) on the lanes ``shaded``, whose albedo it reuses.
-
-        Recorded at the path's first vertex, so no second primary trace is
-        needed; packets without a first-vertex lane skip the shading it takes."""
-        if not old:
-            return old
-        steps = res.steps if res is not None else mi.UInt32(0)
-        albedo = None if shading is None else shading[0]
-        field_bsdf = self.field_bsdf if self.tracer else None
-        # Perspective cameras start rays on the near plane: measure depth from the
-        # camera centre instead, at the unlifted hit point.
-        centre = scene.sensors()[0].world_transform().translation()
-        extra = () if tr is None else (tr,)
-        known = () if albedo is None else (albedo, field_hit if shaded is None else shaded)
-
-        def compute(si, field_hit, steps, first, known, *extra):
-            valid = first & si.is_valid()
-            bsdf = self.bsdf_at(si, ray, field_hit)
-            depth = dr.norm(ray.o + ray.d * si.t - centre)
-            out = primary_aovs(si, field_hit, valid, bsdf, field_bsdf, depth, mi.Float(steps),
-                               *known)
-            if extra:
-                out += [extra[0].x, extra[0].y, extra[0].z]
-            return tuple(dr.select(first, v, o) for v, o in zip(out, old))
-
-        return dr.if_stmt((si, field_hit, steps, first, known, *extra), first, compute,
-                          lambda *args: tuple(mi.Float(o) for o in old), label="first_vertex_aovs")
 
     def aov_names(self):
         if not self.aovs:
