@@ -1,6 +1,8 @@
 """Field tracer steps per ray, by kind of ray, as the integrator casts them.
 
-:func:`ray_steps` traces one camera ray a pixel through a scene's field (pixel cone),
+:func:`ray_steps` traces one camera ray a pixel through a scene's field (pixel cone;
+starting where its bundle's cone ends, :mod:`arches_render.render.ray_bundles`: the
+cone's own steps, a sixteenth of the rays', are not counted),
 then from each hit one shadow ray towards the scene's first sun, in a direction drawn
 on its disk (the integrator skips
 those below the surface: so does this; reported also split into those that reach the
@@ -130,7 +132,11 @@ def traced_rays(desc, tracer, width=320, height=180, seed=1):
     o, d, rate = camera_rays(cam.origin, cam.target, cam.fov, width, height)
     o = o + 0.0 * d
     cone = (mi.Float(0.0) + 0.0 * d.x, mi.Float(rate) + 0.0 * d.x)
-    first = tracer.query(o, d, mi.Float(dr.inf), mi.Bool(True), cone)
+    # Camera rays start where their bundles' cones end, as the integrator starts them
+    # (arches_render.render.ray_bundles; here bundles of pixels in a row, as at 1 spp).
+    bundled = hasattr(tracer, "bundle_starts")
+    t_min = tracer.bundle_starts(o, d, mi.Float(dr.inf), mi.Bool(True), cone) if bundled else None
+    first = tracer.query(o, d, mi.Float(dr.inf), mi.Bool(True), cone, t_min=t_min)
     dr.eval(first.hit, first.t, first.steps)
     hit = first.hit.numpy()
     out = {"camera": TracedRays(o, d, cone, first, np.ones_like(hit))}
