@@ -33,7 +33,7 @@ Cost. A bundle marches at a sixteenth of the rays' width, a few ball bounds a ra
 rays' own marches lose the steps through open air (160x90, 8 spp, first camera, mean /
 packet of 16: goblins 33.3 / 41.7 -> 19.6 / 27.5 steps a ray, the arch bridge 25.9 / 29.0
 -> 12.6 / 15.6, floating islands 17.4 / 19.8 -> 7.7 / 9.9, the sea cliffs 15.8 / 18.3 ->
-8.9 / 11.2), at 0.35 - 1.7 cone steps a ray. Field renders of those scenes took 3-11 %
+8.9 / 11.2), at 0.35 - 1.7 cone steps a ray. Field renders of those scenes took 0-11 %
 less. Hits move within the hit tolerance (a ray starts elsewhere and steps elsewhere);
 on grazing rays, which a tracer may find or step over, they may change.
 
