@@ -268,3 +268,28 @@ def test_a_refined_crop_takes_its_regions_snow_line(tmp_path, capsys):
     C = np.load(tmp_path / doc["far_field"][0]["context"]["file"], allow_pickle=False)
     assert abs(snow - (C.max() - 0.25 * (C.max() - C.min()))) < 1.0
     assert abs(snow - (crop.max() - 0.25 * (crop.max() - crop.min()))) > 50.0
+
+
+def test_close_shots_of_a_refined_crop_see_the_sky_over_the_dem_around_it(tmp_path, capsys):
+    """A crop refined from a caldera lies inside its walls, and the far field (the DEM
+    around the crop) rises over the crop's far side. The close shots count only the sky the
+    scene shows, far field included, so every one renders sky in its top rows (one of them
+    framed the far wall across the crop: 11 % sky there, where the crop alone left 13 %)."""
+    variant()
+    from landscape_helpers import render_shots, shot_report
+    from synthetic_dems import caldera
+
+    from arches_render.scene import load_scene
+    np.save(tmp_path / "caldera.npy", caldera())
+    out = tmp_path / "caldera.toml"
+    rc, stdout, err = cli_out(capsys, "amplify", tmp_path / "caldera.npy", "-o", out, "--cell-size", "150",
+                              "--refine", "--seed", "5", "-q")
+    assert rc == 0, err
+    desc = load_scene(out)
+    assert desc.tables["far_field"][0].context is not None
+    close = [name for name in desc.cameras if name != "overview"]
+    assert len(close) >= 2, list(desc.cameras)
+    for name, (rgb, layers) in render_shots(desc, 64, 36, 2).items():
+        rep = shot_report(desc, layers, desc.cameras[name], 64, 36)
+        if name in close:
+            assert rep["top_sky"] > 0.5, (name, rep)

@@ -76,7 +76,7 @@ from arches_render.mesh.triangles import face_normals, merged_vertices, vertex_n
 
 from .continued_relief import ContinuedRelief
 
-__all__ = ["FarField", "blur_schedule", "far_field_mesh", "frame_band", "sea_ring_mesh", "ring_distances", "parse_far_field", "default_reach"]
+__all__ = ["FarField", "blur_schedule", "far_field_mesh", "surrounding_ground", "frame_band", "sea_ring_mesh", "ring_distances", "parse_far_field", "default_reach"]
 
 _GROWTH = 1.35  # ring distance ratio (the sea's rings)
 
@@ -305,6 +305,33 @@ def far_field_mesh(node, reach=None, sea_level=None, context=None):
     down = face_normals(vertices, faces)[:, 2] < 0
     faces[down] = faces[down][:, ::-1]
     return TriangleMesh(vertices, faces, vertex_normals(vertices, faces))
+
+
+def surrounding_ground(node, widths, sea_level=None, context=None):
+    """The far field's ground around a heightfield tile, out to ``widths`` tile widths,
+    without its faces over the tile: what a view from inside the tile sees beyond it
+    (amplify's close shots take it as an occluder, :func:`.shots.close_shots`).
+
+    Parameters
+    ----------
+    node : arches_render.field.Heightfield
+        The tile's ``heightfield`` or ``implicit_heightfield``.
+    widths : float
+        The reach, in widths of the tile's longer side.
+    sea_level, context
+        As :func:`far_field_mesh`.
+
+    Returns
+    -------
+    trimesh.Trimesh
+    """
+    import trimesh
+    x0, y0, x1, y1 = node.extent
+    mesh = far_field_mesh(node, reach=widths * max(x1 - x0, y1 - y0), sea_level=sea_level, context=context)
+    V, F = np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int64)
+    c = V[F].mean(axis=1)
+    outside = (c[:, 0] < x0) | (c[:, 0] > x1) | (c[:, 1] < y0) | (c[:, 1] > y1)
+    return trimesh.Trimesh(V, F[outside], process=False)
 
 
 def ring_distances(first: float, reach: float, growth: float = _GROWTH) -> list:

@@ -51,6 +51,7 @@ import numpy as np
 from arches_render.materials.masks import PALETTES, terrain_look
 
 from .continued_relief import ContinuedRelief
+from .far_field import surrounding_ground
 from .presets import PRESETS
 
 __all__ = ["frame_camera", "landscape_material", "sun_for", "scene_document", "LANDFORM_NAMES"]
@@ -467,6 +468,12 @@ def _geology(result):
     return node, (np.array([x0, y0, base]), np.array([x1, y1, float(result.heights.max())]))
 
 
+#: How far around the tile, in tile widths, the close shots see the far field's ground
+#: (:func:`.far_field.surrounding_ground`): their cameras' rays reach about 50 landform
+#: distances, and past a few tiles the far field fades to the DEM's mean height.
+SURROUNDINGS_WIDTHS = 4.0
+
+
 def scene_document(result, name, work_dir, progress=None, close=3):
     """The scene document of an :class:`~.amplify.Amplified` and the header lines that describe it.
 
@@ -502,9 +509,8 @@ def scene_document(result, name, work_dir, progress=None, close=3):
     water = result.water
     wmesh = trimesh.load_mesh(Path(work_dir) / result.water_file, process=False) if result.water_file else None
     feature = result.feature
-    over = frame_camera(H, extent, result.focus,
-                        sea_level=float(water.sea_level) if water is not None and water.wet and water.touches_border
-                        else None, context=result.context)
+    far_sea = float(water.sea_level) if water is not None and water.wet and water.touches_border else None
+    over = frame_camera(H, extent, result.focus, sea_level=far_sea, context=result.context)
     overview = {"origin": over["origin"], "target": over["target"], "fov": over["fov"]}
 
     def sun_views(first):
@@ -518,7 +524,8 @@ def scene_document(result, name, work_dir, progress=None, close=3):
     shots = close_shots(result.landforms or result.root, result.terrain, H, extent, feature,
                         water_level=water.level if water is not None else None, water_mesh=wmesh, count=close,
                         margin=result.terrain.R_np + 2 * stats["cell_size"], progress=progress,
-                        sun=lambda first: (sun_for(sun_views(first))["azimuth"], SUN_CLEAR))
+                        sun=lambda first: (sun_for(sun_views(first))["azimuth"], SUN_CLEAR),
+                        surroundings=surrounding_ground(result.terrain, SURROUNDINGS_WIDTHS, far_sea, result.context))
     label = LANDFORM_NAMES[result.preset]
     cameras = {f"{label}_{k + 1}": shot.table() for k, shot in enumerate(shots)}
     cameras["overview"] = overview

@@ -26,7 +26,10 @@ Views
     view casts a 32 x 18 grid of rays
     (Embree) against the mesh of the amplified field around the landform (banded
     polygonization), the DEM mesh of the rest of the tile (not over the landform,
-    where the DEM's surface would close the mouths of its caves) and the water: its *cover* is
+    where the DEM's surface would close the mouths of its caves), the water, and the
+    far field's ground around the tile as the scene will show it (a refined crop's
+    DEM around it; without it, a crop inside a caldera framed the caldera's far wall
+    for sky): its *cover* is
     the fraction of rays whose first hit lies where the amplified field differs
     from the plain terrain (more than 0.75 voxel from the plain surface), its *sky*
     the fraction of the top two rows that escape upwards, its *block* the fraction
@@ -230,12 +233,14 @@ def _rays(origin, target, fov, aspect, up=(0.0, 0.0, 1.0)):
 
 
 class _Scene:
-    """Ray casters of one landform's neighbourhood: local amplified mesh, tile DEM mesh, water."""
+    """Ray casters of one landform's neighbourhood: local amplified mesh, tile DEM mesh, water,
+    and the casters of what lies around the tile (``around``: the far field's ground, shared
+    by every landform)."""
 
-    def __init__(self, local, tile, water):
+    def __init__(self, local, tile, water, around=()):
         self.local = RayCaster(local) if local is not None and len(local.faces) else None
         self.casters = [self.local] * (self.local is not None) + [
-            RayCaster(m) for m in (tile, water) if m is not None and len(m.faces)]
+            RayCaster(m) for m in (tile, water) if m is not None and len(m.faces)] + list(around)
 
     def first_hit(self, O, D, far):
         """``(t, t_local, n)``: the first hit's distance over every mesh, the local mesh's
@@ -381,7 +386,7 @@ def _depth_steps(D, t, hit, a, b, before, after):
 
 
 def close_shots(root, plain, heights, extent, feature, water_level=None, water_mesh=None, count=3,
-                fov=50.0, aspect=16 / 9, margin=0.0, progress=None, sun=None):
+                fov=50.0, aspect=16 / 9, margin=0.0, progress=None, sun=None, surroundings=None):
     """Close shots of the most significant 3-D landforms (see the module docstring).
 
     Parameters
@@ -410,6 +415,11 @@ def close_shots(root, plain, heights, extent, feature, water_level=None, water_m
     sun : callable, optional
         ``sun(first) -> (azimuth, clear)``: the azimuth towards the sun chosen for the
         first shot (degrees) and how near it the later shots may look (degrees).
+    surroundings : trimesh.Trimesh, optional
+        The ground around the tile that the scene shows (its far field,
+        :func:`.far_field.far_field_mesh`): an occluder of every view, so that sky a
+        view would show over the tile alone but the far field hides is not counted
+        (a refined crop inside a caldera looked at its wall across the crop).
 
     Returns
     -------
@@ -425,6 +435,7 @@ def close_shots(root, plain, heights, extent, feature, water_level=None, water_m
     tile_centres = tile.triangles_center
     boxes = landform_cells(root, extent, feature)
     vfov2 = math.atan(math.tan(math.radians(fov) / 2) / aspect)
+    around = [RayCaster(surroundings)] if surroundings is not None and len(surroundings.faces) else []
     found = []
     for b, box in enumerate(boxes):
         volume, voxel = landform_volume(root, plain, box)
@@ -444,7 +455,7 @@ def close_shots(root, plain, heights, extent, feature, water_level=None, water_m
         # caves and undercuts carved under it and would hide every one of them.
         c, m = tile_centres, grow - voxel
         away = ~((c[:, 0] > lo[0] - m) & (c[:, 0] < hi[0] + m) & (c[:, 1] > lo[1] - m) & (c[:, 1] < hi[1] + m))
-        scene = _Scene(local, trimesh.Trimesh(tile.vertices, tile.faces[away], process=False), water_mesh)
+        scene = _Scene(local, trimesh.Trimesh(tile.vertices, tile.faces[away], process=False), water_mesh, around)
         # Every candidate camera at once: spans x azimuths x heights.
         sp, az, hh = (a.ravel() for a in np.meshgrid(_SPANS, 2 * np.pi * np.arange(_AZIMUTHS) / _AZIMUTHS,
                                                        _HEIGHTS, indexing="ij"))
