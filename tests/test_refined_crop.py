@@ -171,8 +171,8 @@ material = "ground"
 
 def test_amplify_refine_carves_a_coarse_coast_in_metres(tmp_path, capsys):
     """``amplify --refine`` on a 500 m coast: a crop of fine cells whose landforms are
-    metres wide, its far field the DEM around it; without ``--refine`` the header says
-    how to get one."""
+    metres wide, its far field the DEM around it; with ``--no-refine`` the header says at
+    what scale the whole DEM's landforms are carved."""
     variant()
     from arches_render.scene import load_scene
     np.save(tmp_path / "coast.npy", _coast())
@@ -202,9 +202,9 @@ def test_amplify_refine_carves_a_coarse_coast_in_metres(tmp_path, capsys):
 
     plain = tmp_path / "plain.toml"
     rc, stdout, err = cli_out(capsys, "amplify", tmp_path / "coast.npy", "-o", plain, "--cell-size", "500",
-                              "--seed", "2", "--preset", "sea", "-q")
+                              "--seed", "2", "--preset", "sea", "--no-refine", "-q")
     assert rc == 0, err
-    assert "--refine amplifies a crop" in plain.read_text()
+    assert "landforms are carved at this scale (--no-refine)" in plain.read_text()
     # The same preset on the whole DEM sizes its coastal cliffs by the DEM's cell; the
     # crop's are its benches' risers (a tenth of its relief, here 100 m).
     def cliff(text):

@@ -185,8 +185,9 @@ def test_coastal_dem_of_hundreds_of_km_renders_a_landscape(tmp_path, capsys):
     variant()
     from arches_render.scene import load_scene
     out = tmp_path / "salish.toml"
+    # The whole DEM (--no-refine; refined by default, it is a crop: tests/test_refined_crop.py).
     rc, stdout, err = _amplify(capsys, REPO / "scenes" / "data" / "real_salish_sea_2435m.npy", "-o", out,
-                               "--cell-size", "2435", "--max-cells", "3000")
+                               "--cell-size", "2435", "--max-cells", "3000", "--no-refine")
     assert rc == 0, err
     assert "preset sea" in stdout
     desc = load_scene(out)
@@ -466,8 +467,14 @@ def test_mountains_and_a_volcanic_cone_amplify_into_landscapes(tmp_path, capsys,
     assert len(covers) >= 3 and min(covers) >= 1.0, cams
     if dem == "real_aletsch_200m":  # high mountains: grey rock, snow on the top quarter of the relief
         import tomllib
-        look = tomllib.loads(out.read_text())["materials"]["landscape"]
-        H = np.load(REPO / "scenes" / "data" / f"{dem}.npy", allow_pickle=False)
+        doc = tomllib.loads(out.read_text())
+        look = doc["materials"]["landscape"]
+        # Refined (the default at 200 m), the layers follow the region around the crop:
+        # the DEM as its far field reads it (the spline's context, which overshoots the
+        # DEM's samples by metres), else the DEM.
+        context = doc["far_field"][0].get("context")
+        H = np.load(tmp_path / context["file"] if context else REPO / "scenes" / "data" / f"{dem}.npy",
+                    allow_pickle=False)
         relief = float(H.max() - H.min())
         assert look["strata"]["palette"] == "limestone", look["strata"]
         assert abs(look["overrides"]["snow.height_min"] - (float(H.max()) - 0.25 * relief)) < 1.0, look["overrides"]
