@@ -133,7 +133,7 @@ def landform_size(scales, cell, precision) -> float:
 
 # -- the pipeline ------------------------------------------------------------------------------
 def amplify(heights, cell_size, preset, seed, work_dir, prefix="amplified", progress=None, options=None,
-            sea_level=0.0, precision=None, detail=True):
+            sea_level=0.0, precision=None, detail=True, lake_levels=None):
     """Build the amplified construction tree of a DEM for a preset.
 
     Parameters
@@ -167,6 +167,9 @@ def amplify(heights, cell_size, preset, seed, work_dir, prefix="amplified", prog
         Smallest detail in metres (default :func:`.detail.default_precision`).
     detail : bool
         Add the sub-cell fBm octaves (:mod:`.detail`); ``False``: the DEM alone.
+    lake_levels : numpy.ndarray, optional
+        Where ``heights`` are a refined crop, the levels of the lakes its DEM holds
+        (:attr:`.refined_crop.RefinedCrop.lake_levels`; :func:`.water.find_water`).
 
     Returns
     -------
@@ -208,13 +211,13 @@ def amplify(heights, cell_size, preset, seed, work_dir, prefix="amplified", prog
     spec = PRESETS[preset]
     zlo, zhi = float(H.min()), float(H.max())
     flat = zhi - zlo < 0.5 * cell  # no cliff, valley, sink or talus: the processes have nothing to act on
-    water = find_water(H, sea_level, lakes=preset != "karst")  # dolines drain underground
+    water = find_water(H, sea_level, lakes=preset != "karst", lake_levels=lake_levels)  # dolines drain underground
     if preset == "sea" and water.sea_level is None:
         fallback = zlo - cell if flat else zlo + 0.12 * max(zhi - zlo, 4 * cell)
         notes.append(f"no sea below {level:g} m: the sea preset sets its sea at {fallback:.4g} m "
                      f"(lowest 12 % of the relief; --sea-level to choose)")
         level = fallback
-        water = find_water(H, level, lakes=True)
+        water = find_water(H, level, lakes=True, lake_levels=lake_levels)
         if water.sea_level is None:  # a closed basin: its floor is not at the border
             water = WaterBodies(np.where(H <= level, level, np.nan), H <= level, level, water.lakes)
     scales = landform_scales(H, cell, preset, level) if not flat else {}

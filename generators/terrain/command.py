@@ -217,7 +217,8 @@ def run(args) -> int:
                                                                  bar(done, total)),
                             say=lambda line: print(f"arches-render amplify: {args.dem}: {line}", flush=True),
                             options=None if args.fallen_blocks else {"fallen_blocks": False},
-                            context=None if crop is None else (crop.context, crop.context_extent))
+                            context=None if crop is None else (crop.context, crop.context_extent),
+                            lake_levels=None if crop is None else crop.lake_levels)
         bar.close()
         shots_bar.close()
         result, doc, lines = kept.result, kept.doc, kept.lines

@@ -120,7 +120,7 @@ class Attempt:
 
 
 def amplify_soft(heights, cell_size, preset, seed, work_dir, prefix, name, sea_level=0.0, precision=None,
-                 progress=None, shots_progress=None, say=None, options=None, context=None):
+                 progress=None, shots_progress=None, say=None, options=None, context=None, lake_levels=None):
     """Amplify with the best preset that makes a landform (see the module docstring).
 
     Parameters
@@ -151,6 +151,9 @@ def amplify_soft(heights, cell_size, preset, seed, work_dir, prefix, name, sea_l
     context : (numpy.ndarray, tuple), optional
         ``(heights, extent)`` of the DEM the heights are a refined crop of
         (:mod:`.refined_crop`), given to every attempt's result (its overview and far field).
+    lake_levels : numpy.ndarray, optional
+        The levels of the lakes of the DEM the heights are a refined crop of
+        (:func:`.amplify.amplify`).
 
     Returns
     -------
@@ -171,7 +174,7 @@ def amplify_soft(heights, cell_size, preset, seed, work_dir, prefix, name, sea_l
     for k, (choice, reason) in enumerate(candidates):
         folder = Path(work_dir) / (f"_try{k + 1}" if k else "")
         run = _Run(partial(_amplify_one, H, cell_size, choice, reason, seed, folder, prefix, sea_level, precision,
-                           progress, options, context), folder, choice, reason)
+                           progress, options, context, lake_levels), folder, choice, reason)
         runs.append(run)
         if "note" in run.get().stats:  # a flat DEM: no preset acts on it
             break
@@ -189,9 +192,9 @@ def amplify_soft(heights, cell_size, preset, seed, work_dir, prefix, name, sea_l
 
 
 def _amplify_one(H, cell_size, choice, reason, seed, folder, prefix, sea_level, precision, progress, options,
-                 context):
+                 context, lake_levels):
     result = amplify(H, cell_size, choice, seed, folder, prefix, sea_level=sea_level, precision=precision,
-                     progress=progress, options=options)
+                     progress=progress, options=options, lake_levels=lake_levels)
     result.reason, result.context = reason, context
     return result
 

@@ -101,6 +101,9 @@ class RefinedCrop:
         ``(x0, y0, x1, y1)`` of the DEM's samples in the crop's frame.
     notes : list of str
         What was done, for the scene's header.
+    lake_levels : numpy.ndarray
+        ``heights``' shape: the level of the DEM's lake over each sample within a DEM
+        cell of it, NaN elsewhere (:func:`crop_lake_levels`).
     """
 
     heights: np.ndarray
@@ -109,6 +112,7 @@ class RefinedCrop:
     context: np.ndarray
     context_extent: tuple
     notes: list = field(default_factory=list)
+    lake_levels: np.ndarray = None
 
 
 def _window_reduce(A, side, reduce):
@@ -174,8 +178,12 @@ def _fbm_heights(x, y, table):
 
 #: Slopes (degrees) over which the surface turns into benches and risers.
 BENCH_SLOPES = (12.0, 22.0)
-#: Share of a band's height its riser takes (the rest is its bench).
-RISER = 0.3
+#: Range of the share of a band's height its riser takes (the rest is its bench), drawn per band.
+RISER = (0.2, 0.45)
+#: Band thicknesses: the band height times ``exp(N(0, BAND_SIGMA))``, clipped to
+#: :data:`BAND_SPREAD` of it.
+BAND_SIGMA = 0.45
+BAND_SPREAD = (0.35, 2.5)
 
 
 def _benches(Z, cell, sea_level, seed):
@@ -185,11 +193,12 @@ def _benches(Z, cell, sea_level, seed):
     (an escarpment of 30 degrees at 200 m cells hides walls a hundred metres tall); a
     spline through it is a smooth ramp, where no process finds a wall to undercut.
     Where the slope passes :data:`BENCH_SLOPES`, heights are mapped through a staircase
-    of bands ``b`` tall, each a flat bench and a riser of :data:`RISER` of it (on a
-    slope ``g`` the riser climbs at ``g / RISER``: 27 degrees become 60), the
-    band boundaries warped by fBm a band high (strata are not contour lines):
-    ``b`` is a tenth of the crop's relief, 40-200 m (the strata thickness of
-    :func:`.preset_choice.landform_scales` on real escarpments). Not in the paper,
+    of bands about ``b`` tall, each a flat bench and a riser of a share of it drawn in
+    :data:`RISER` (on a slope ``g`` the riser climbs at ``g / share``: 27 degrees become
+    50-70), the band boundaries warped by fBm a band high (strata are not contour
+    lines): ``b`` is a tenth of the crop's relief, 40-200 m (the strata thickness of
+    :func:`.preset_choice.landform_scales` on real escarpments), each band's thickness
+    ``b`` times a lognormal factor (:data:`BAND_SIGMA`, :data:`BAND_SPREAD`), seeded. Not in the paper,
     which amplifies DEMs that resolve their cliffs; this restores what the cell averaged.
     """
     gy, gx = np.gradient(Z, cell, cell)
@@ -206,9 +215,18 @@ def _benches(Z, cell, sea_level, seed):
     X, Y = np.meshgrid(x, x)
     warp = _fbm_heights(X, Y, dict(amplitude=band / 0.5, wavelength=20.0 * band, octaves=3, lacunarity=2.0,
                                    gain=0.5, seed=int(seed) + 7919))
-    q = (Z + warp) / band
-    t = q - np.floor(q)
-    stair = (np.floor(q) + _smoothstep((t - (1.0 - RISER)) / RISER)) * band - warp
+    h = Z + warp
+    # Bands of varied thickness and riser share, as beds are (equal bands read as a
+    # contour map from above: the Salish crop's overview was regular stripes).
+    rng = np.random.default_rng(int(seed) + 15838)
+    lo_h, hi_h = float(h.min()) - 2.0 * band, float(h.max()) + 2.0 * band
+    count = int(np.ceil((hi_h - lo_h) / (BAND_SPREAD[0] * band))) + 1
+    thick = band * np.clip(np.exp(rng.normal(0.0, BAND_SIGMA, count)), *BAND_SPREAD)
+    tops = lo_h + np.concatenate([[0.0], np.cumsum(thick)])
+    riser = rng.uniform(*RISER, count)
+    k = np.clip(np.searchsorted(tops, h, side="right") - 1, 0, count - 1)
+    t = (h - tops[k]) / thick[k]
+    stair = tops[k] + _smoothstep((t - (1.0 - riser[k])) / riser[k]) * thick[k] - warp
     return Z + weight * (stair - Z), band
 
 
@@ -295,7 +313,44 @@ def refine_crop(heights, cell, sea_level=0.0, seed=0, cells=REFINE_CELLS, width=
            else "(the DEM's spectrum gave no detail to continue)")
         + f", stepped into benches and risers {bands:.3g} m tall on slopes over {BENCH_SLOPES[0]:g} deg"
         + f"; the rest of the DEM, by the same spline at {cell / up:.4g} m, is the far field")
-    return RefinedCrop(fine_H, fine, (i0, j0, side), context, context_extent, notes)
+    return RefinedCrop(fine_H, fine, (i0, j0, side), context, context_extent, notes,
+                       crop_lake_levels(H, wet_level, (i0, j0, side), cells))
+
+
+def crop_lake_levels(H, sea_level, window, cells):
+    """The lakes of a DEM over a crop of it: per crop sample, the level of the lake whose
+    cells lie within one DEM cell of it (the highest, where two do), NaN elsewhere.
+
+    The lakes are the DEM's own (:func:`.water.find_water` on its cells): the crop's
+    benches and detail are relief the DEM did not measure, and its window may cut a
+    basin open (:mod:`.water`, "Measured relief").
+
+    Parameters
+    ----------
+    H : numpy.ndarray
+        The DEM (m).
+    sea_level : float or None
+        Its sea level.
+    window : (int, int, int)
+        ``(i0, j0, side)``: the crop's first DEM sample (column, row) and its DEM cells a side.
+    cells : int
+        The crop's cells a side.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(cells + 1, cells + 1)`` levels (m).
+    """
+    from scipy.ndimage import maximum_filter
+
+    from .water import find_water
+    water = find_water(H, sea_level, lakes=True)
+    lakes = np.where(water.sea | ~np.isfinite(water.level), -np.inf, water.level)
+    near = maximum_filter(lakes, size=3, mode="nearest")
+    i0, j0, side = window
+    k = np.rint(np.arange(cells + 1) * (side / cells)).astype(int)
+    out = near[np.ix_(j0 + k, i0 + k)]
+    return np.where(np.isfinite(out), out, np.nan)
 
 
 def attach_context(doc, crop, folder, prefix) -> str:

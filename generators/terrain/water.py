@@ -33,6 +33,15 @@ Lakes
     from each other are separate pools at the same level, each kept if it passes the
     depth and size rules above.
 
+Measured relief
+    A crop refined from a coarser DEM (:mod:`.refined_crop`) adds relief the DEM did not
+    measure: benches, which follow warped strata and so dip and rise, and detail, which
+    dents them. Their closed pits, tens of metres deep at 10 m cells, held lakes on a
+    caldera's terraces (five on some seeds, besides the one on its floor), and a crop that
+    cuts a basin leaves it open. There the lakes are the DEM's own, found on its cells as
+    above (:func:`.refined_crop.crop_lake_levels`), and flood the crop's cells below their
+    level within a DEM cell of them.
+
 Surfaces
     Each water body is a flat mesh at its level over its cells, *grown* by
     ``reach`` metres (the sea: far enough to flood the sea caves cut under the
@@ -103,7 +112,7 @@ class WaterBodies:
         return bool(np.isfinite(self.level).any())
 
 
-def find_water(heights, sea_level=0.0, lakes=True):
+def find_water(heights, sea_level=0.0, lakes=True, lake_levels=None):
     """Sea and lakes of a DEM (see the module docstring).
 
     Parameters
@@ -114,6 +123,11 @@ def find_water(heights, sea_level=0.0, lakes=True):
         Sea level (m); ``None``: no sea.
     lakes : bool
         Look for lakes.
+    lake_levels : array_like, optional
+        ``(ny, nx)`` levels of the lakes the DEM holds where ``heights`` add relief it did
+        not measure (a refined crop, :func:`.refined_crop.crop_lake_levels`; NaN: no
+        lake): the cells below them are the lakes, and no other depression is looked for
+        (module docstring, "Measured relief").
 
     Returns
     -------
@@ -124,7 +138,13 @@ def find_water(heights, sea_level=0.0, lakes=True):
     sea = sea_mask(H, sea_level) if sea_level is not None else np.zeros(H.shape, bool)
     level[sea] = sea_level
     found = []
-    if lakes:
+    if lakes and lake_levels is not None:
+        L = np.asarray(lake_levels, np.float64)
+        wet = np.isfinite(L) & (H < np.where(np.isfinite(L), L, -np.inf)) & ~sea
+        lab, n = ndimage.label(wet, structure=np.ones((3, 3), bool))
+        level[wet] = L[wet]
+        found = [(float(L[lab == k].max()), int((lab == k).sum())) for k in range(1, n + 1)]
+    elif lakes:
         relief = float(np.percentile(H, 99) - np.percentile(H, 1))
         deep_enough = max(LAKE_DEPTH_M, LAKE_DEPTH_RELIEF * relief)
         filled = fill_depressions(H)
