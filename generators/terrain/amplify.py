@@ -219,7 +219,7 @@ def amplify(heights, cell_size, preset, seed, work_dir, prefix="amplified", prog
         level = fallback
         water = find_water(H, level, lakes=True, lake_levels=lake_levels)
         if water.sea_level is None:  # a closed basin: its floor is not at the border
-            water = WaterBodies(np.where(H <= level, level, np.nan), H <= level, level, water.lakes)
+            water = WaterBodies(np.where(H <= level, level, np.nan), H <= level, level, water.lakes, heights=H)
     scales = landform_scales(H, cell, preset, level) if not flat else {}
     feature = landform_size(scales, cell, precision)
     R = min(4.0 * cell, 2.0 * feature, 0.45 * min(W, D))

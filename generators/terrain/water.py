@@ -47,7 +47,11 @@ Surfaces
     ``reach`` metres (the sea: far enough to flood the sea caves cut under the
     land; lakes: one cell) so that the water meets the shore under the ground
     instead of leaving a gap along it: where the ground stands above the water,
-    the water is hidden under it. Runs of wet cells along each row are merged into
+    the water is hidden under it. It grows only under that shore: a sample below
+    the level that holds no water lies outside the basin (past a lake's spill point,
+    where the ground falls away again, or in a pit left dry), and no cell with such a
+    corner is water. Grown over it, a crater lake filled to its brim stood as a sheet
+    in the air past the low point of its rim. Runs of wet cells along each row are merged into
     one quad (the surface is flat, so T-junctions leave no crack), which keeps a
     large sea of a large DEM to a few thousand triangles per row band.
 
@@ -99,10 +103,13 @@ class WaterBodies:
         ``(level, cells)`` of each lake.
     touches_border : bool
         Whether the sea reaches the tile's border (it then continues to the horizon).
+    heights : numpy.ndarray or None
+        ``(ny, nx)`` the DEM the water was found on: where the surfaces may grow
+        (module docstring, "Surfaces"); ``None``: anywhere.
     """
 
-    def __init__(self, level, sea, sea_level, lakes):
-        self.level, self.sea, self.lakes = level, sea, lakes
+    def __init__(self, level, sea, sea_level, lakes, heights=None):
+        self.level, self.sea, self.lakes, self.heights = level, sea, lakes, heights
         self.sea_level = sea_level if sea.any() else None
         self.touches_border = bool(sea[0].any() or sea[-1].any() or sea[:, 0].any() or sea[:, -1].any())
 
@@ -168,7 +175,7 @@ def find_water(heights, sea_level=0.0, lakes=True, lake_levels=None):
                     if pool.sum() >= 9 and h - H[box][pool].min() >= deep_enough:
                         level[box][pool] = h
                         found.append((float(h), int(pool.sum())))
-    return WaterBodies(level, sea, sea_level, found)
+    return WaterBodies(level, sea, sea_level, found, heights=H)
 
 
 def _balanced_level(heights, spill, allowed):
@@ -216,13 +223,17 @@ def descent_sinks(heights):
         to = further
 
 
-def _grow(level, mask, steps):
-    """Spread the levels of ``mask`` over ``steps`` cells around it (the highest neighbour wins)."""
+def _grow(level, mask, steps, heights=None):
+    """Spread the levels of ``mask`` over ``steps`` cells around it (the highest neighbour
+    wins), only into samples of ``heights`` at or above the level they would take (the
+    shore; everywhere without ``heights``)."""
     lev = np.where(mask, level, -np.inf)
     grown = mask.copy()
     for _ in range(int(steps)):
         nxt = ndimage.grey_dilation(lev, size=(3, 3))
         new = ~grown & np.isfinite(nxt)
+        if heights is not None:
+            new &= heights >= nxt
         lev[new] = nxt[new]
         grown |= new
     return lev, grown
@@ -249,14 +260,19 @@ def water_mesh(water: WaterBodies, extent, sea_reach_cells=2):
     x0, y0, x1, y1 = extent
     dx, dy = (x1 - x0) / (nx - 1), (y1 - y0) / (ny - 1)
     wet = np.isfinite(water.level)
-    lev, grown = _grow(water.level, wet & ~water.sea, 1)
-    slev, sgrown = _grow(water.level, water.sea, max(1, int(sea_reach_cells)))
+    lev, grown = _grow(water.level, wet & ~water.sea, 1, water.heights)
+    slev, sgrown = _grow(water.level, water.sea, max(1, int(sea_reach_cells)), water.heights)
     lev = np.where(sgrown & (~grown | (slev > lev)), slev, lev)
     grown |= sgrown
-    # A cell (between samples j..j+1, i..i+1) is water when any corner is: at the highest level.
+    # A cell (between samples j..j+1, i..i+1) is water when any corner is: at the highest level,
+    # unless a corner is dry ground below that level (outside the basin: module docstring).
     corners = np.stack([lev[:-1, :-1], lev[:-1, 1:], lev[1:, :-1], lev[1:, 1:]])
     cell_lev = corners.max(axis=0)
     cell_wet = np.isfinite(cell_lev)
+    if water.heights is not None:
+        low = np.where(grown, np.inf, water.heights)
+        lowest = np.stack([low[:-1, :-1], low[:-1, 1:], low[1:, :-1], low[1:, 1:]]).min(axis=0)
+        cell_wet &= ~(lowest < cell_lev)
     # One quad per run of wet cells at one level along a row, rows in order: a run
     # starts at a wet cell whose left neighbour is dry or at another level, and ends
     # before the next start or dry cell (each row padded with one dry cell).
