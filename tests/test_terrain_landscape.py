@@ -588,3 +588,16 @@ def test_label_extrema_are_scipys(dtype):
         assert lo.dtype == (np.float64 if dtype == np.int32 else dtype)
         np.testing.assert_array_equal(lo, want_lo.astype(lo.dtype))
         np.testing.assert_array_equal(hi, want_hi.astype(hi.dtype))
+
+
+def test_a_dem_without_a_cell_size_and_needle_slopes_says_so(tmp_path, capsys):
+    # A .npy says nothing of its cell: 1 m is assumed. The canyon of 30 m cells read so
+    # has slopes of 60-90 deg, and a 2.4 km DEM read so rendered as needles: the user hears.
+    np.save(tmp_path / "v.npy", _valley(32))
+    for cell, noted in ((None, True), ("30", False)):
+        out = tmp_path / f"v{cell}.toml"
+        rc, stdout, err = _amplify(capsys, tmp_path / "v.npy", "-o", out, "--preset", "strata", "--no-refine",
+                                   *(("--cell-size", cell) if cell else ()))
+        assert rc == 0, err
+        said = [line for line in stdout.splitlines() if "gives no cell size" in line]
+        assert len(said) == noted and (not noted or "--cell-size" in said[0]), stdout

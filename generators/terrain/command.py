@@ -69,6 +69,9 @@ MAX_CELLS = 8192 * 8192
 MAX_ASPECT = 64
 #: Largest absolute height after scaling (metres).
 MAX_HEIGHT = 1e7
+#: Median slope (degrees) over which a DEM whose cell was assumed (1 m: the file gives none)
+#: gets a note: the cell is likely wrong (a 2.4 km DEM read at 1 m became needles).
+UNSURE_SLOPE = 45.0
 
 
 def _finite_float(name):
@@ -165,7 +168,19 @@ def _checked_heights(args, dem):
     if not math.isfinite(big) or big > MAX_HEIGHT or not np.all(np.isfinite(H.astype(np.float32))):
         raise UsageError(f"{args.dem}: heights reach {big:.3g} m after scaling by {scale:g}; "
                          f"amplify accepts heights within +-{MAX_HEIGHT:g} m")
+    if dem.cell is None and args.cell_size is None and not dem.normalised:
+        steep = _median_slope(H, cell)
+        if steep > UNSURE_SLOPE:
+            notes.append(f"the file gives no cell size, so {cell:g} m was assumed, and its median slope is then "
+                         f"{steep:.0f} deg; --cell-size D gives the metres between samples")
     return H, cell, notes
+
+
+def _median_slope(H, cell) -> float:
+    """Median slope of ``H`` (degrees), on at most about a million samples."""
+    k = max(1, int(math.sqrt(H.size / 1e6)))
+    gy, gx = np.gradient(np.asarray(H[::k, ::k], np.float64), k * cell)
+    return math.degrees(math.atan(float(np.median(np.hypot(gx, gy)))))
 
 
 def run(args) -> int:
