@@ -8,8 +8,8 @@ import math
 
 import numpy as np
 
-from arches_render.generators.terrain.scene_writer import (LANDFORM_FILL, LANDFORM_LEVEL, TILE_INSET, frame_camera,
-                                                           landform_view)
+from arches_render.generators.terrain.overview import (LANDFORM_FILL, LANDFORM_LEVEL, TILE_INSET, frame_camera,
+                                                       landform_view)
 
 EXTENT = (-500.0, -400.0, 500.0, 400.0)
 
@@ -79,3 +79,58 @@ def test_relief_that_runs_off_the_tile_keeps_the_features_framing():
     # On the cone: a distance and a height.
     view = landform_view(H, EXTENT, (-100.0, 0.0, 30.0), 1.0, 50.0)
     assert view is not None and view[0] > 0.0 and view[1] > 30.0, view
+
+
+def test_features_spread_past_an_isolated_cone_leave_it_the_subject_framed_from_over_the_tile():
+    # A cone in the tile's west half, features (a river's primitives, say) scattered round
+    # it and far past it, their centroid on its flank: the overview aims at the cone's
+    # centre, from over the tile. It used to aim at the features' centroid from the
+    # features' own framing distance, off the tile over the far field's plain: a small
+    # volcano's overview was a green plain with the cone at its edge.
+    X, Y = _grid()
+    centre = np.array([-250.0, 0.0])
+    H = np.clip(100.0 * (1.0 - np.hypot(X - centre[0], Y - centre[1]) / 200.0), 0.0, None).astype(np.float32)
+    rng = np.random.default_rng(2)
+    spread = np.column_stack([rng.uniform(-120.0, 280.0, 60) - 250.0 + 50.0, rng.uniform(-350.0, 350.0, 60) + 50.0,
+                              np.full(60, 40.0)])
+    spread[:, :2] -= spread[:, :2].mean(axis=0) - (centre + [50.0, 50.0])  # the centroid on the flank
+    cam = frame_camera(H, EXTENT, spread)
+    origin, target = np.asarray(cam["origin"]), np.asarray(cam["target"])
+    assert np.linalg.norm(target[:2] - centre) < 10.0, cam
+    x0, y0, x1, y1 = EXTENT
+    assert x0 < origin[0] < x1 and y0 < origin[1] < y1, cam
+    assert _height_at(H, origin[0], origin[1]) < 50.0, cam  # outside the cone's footprint
+
+
+def test_a_coast_under_a_mountain_is_seen_from_low_over_the_sea_with_the_slope_rising_under_the_sky():
+    # The sea in the south, a 1.5 km mountain behind the coast. The overview tilts up
+    # towards the slope: the camera stays low, the coast low in the frame and the ridge
+    # under its top 15 %. It used to rise with its target, the pitch kept, until no ground
+    # stood over the frame's top line: 1.2 km up, looking down a slope in haze.
+    cell = 100.0
+    extent = (-5000.0, -5000.0, 5000.0, 5000.0)
+    x = np.arange(-5000.0, 5000.0 + cell / 2, cell)
+    X, Y = np.meshgrid(x, x)
+    H = np.where(Y < -1000.0, -40.0, 1500.0 * np.clip((Y + 1000.0) / 4000.0, 0.0, 1.0) ** 0.7
+                 + 80.0 * np.sin(X / 700.0)).astype(np.float32)
+    coast = np.column_stack([np.linspace(-3000.0, 3000.0, 30), np.full(30, -950.0), np.full(30, 10.0)])
+    cam = frame_camera(H, extent, coast, sea_level=0.0)
+    origin, target = np.asarray(cam["origin"]), np.asarray(cam["target"])
+    assert origin[2] < 600.0, cam
+    vfov2 = math.atan(math.tan(math.radians(cam["fov"]) / 2) * 9 / 16)
+    axis = target - origin
+    pitch = math.atan2(axis[2], math.hypot(*axis[:2]))
+
+    def angle(p):  # elevation of a point over the frame's middle, along the view's vertical
+        d = np.asarray(p, float) - origin
+        return math.atan2(d[2], float(np.dot(d[:2], axis[:2])) / math.hypot(*axis[:2])) - pitch
+
+    # The coast in the frame, in its lower part.
+    assert -0.85 * vfov2 <= angle(coast.mean(axis=0)) < 0.0, cam
+    # Every ground sample ahead of the camera (within the frame's width) under the top line.
+    u = axis[:2] / math.hypot(*axis[:2])
+    along = (X - origin[0]) * u[0] + (Y - origin[1]) * u[1]
+    across = (Y - origin[1]) * u[0] - (X - origin[0]) * u[1]
+    ahead = (along > 0) & (np.abs(across) < along * math.tan(math.radians(20)))
+    rise = np.degrees(np.arctan2(H[ahead] - origin[2], along[ahead]))
+    assert rise.max() <= math.degrees(pitch + 0.7 * vfov2) + 0.5, (rise.max(), cam)

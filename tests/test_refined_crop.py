@@ -220,7 +220,7 @@ def test_overview_of_a_refined_crop_stands_over_it():
     may stand past its border."""
     variant()
     from arches_render.generators.terrain.refined_crop import refine_crop
-    from arches_render.generators.terrain.scene_writer import TILE_INSET, frame_camera
+    from arches_render.generators.terrain.overview import TILE_INSET, frame_camera
     crop = refine_crop(_coast(), CELL, 0.0, seed=1, cells=64, width=5000.0)
     half = 0.5 * 64 * crop.cell
     extent = (-half, -half, half, half)
