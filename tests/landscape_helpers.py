@@ -122,3 +122,44 @@ def shot_report(desc, layers, camera, width, height, sky_rows=2, margin=1.0, tol
         out["tile_share"] = float((over & ground).sum() / max(ground.sum(), 1))
     out["wall_hits"] = walls
     return out
+
+
+def skyline_report(rgb, layers, band=1):
+    """Where a shot's ground meets its sky: how flat that line is, what makes it, and how
+    much it stands out (issue 34: an overview's far field fades into haze, never a ruled
+    line against the sky).
+
+    Per column, the skyline is the first row from the top with a hit in every sample
+    (``coverage``), below at least ``band + 1`` rows of sky (no hit at all); its
+    contrast is ``|L_ground - L_sky| / L_sky`` of the luminances (Rec. 709) of the
+    ``band`` rows just below and just above it.
+
+    Returns
+    -------
+    dict
+        ``skyline_columns`` (share of columns with such a skyline), ``skyline_flat``
+        (share of those within a row of the median skyline row), ``skyline_far`` (share
+        of those whose ground below the skyline is the far field, a mesh) and
+        ``skyline_contrast`` (median contrast; 0 without a skyline).
+    """
+    cov = layers["coverage"][0]
+    full, mesh = cov.sum(axis=-1) > 0.999, cov[..., 1] > 0.5
+    none = cov.sum(axis=-1) == 0.0
+    lum = np.asarray(rgb, np.float64)[..., :3] @ [0.2126, 0.7152, 0.0722]
+    rows, far, contrast = [], [], []
+    for c in range(full.shape[1]):
+        hit = np.flatnonzero(full[:, c])
+        r = int(hit[0]) if hit.size else -1
+        if r <= band or r + band >= full.shape[0] or not none[r - band - 1:r - 1, c].all():
+            continue
+        sky = lum[r - band - 1:r - 1, c].mean()
+        ground = lum[r + 1:r + 1 + band, c].mean()
+        rows.append(r)
+        far.append(bool(mesh[r + 1:r + 1 + band, c].all()))
+        contrast.append(abs(ground - sky) / max(sky, 1e-6))
+    if not rows:
+        return dict(skyline_columns=0.0, skyline_flat=0.0, skyline_far=0.0, skyline_contrast=0.0)
+    rows = np.asarray(rows)
+    return dict(skyline_columns=len(rows) / full.shape[1],
+                skyline_flat=float(np.mean(np.abs(rows - np.median(rows)) <= 1)),
+                skyline_far=float(np.mean(far)), skyline_contrast=float(np.median(contrast)))
