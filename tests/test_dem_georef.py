@@ -245,3 +245,19 @@ def test_web_elevation_tiles_decode_to_metres(tmp_path, capsys, encoding, tol):
                                "--cell-size", 20, "--preset", "river")
     assert rc == 0 and "heights 32x32 at 20 m" in stdout, err + stdout
     assert float(np.load(tmp_path / "t.heights.npy", allow_pickle=False).min()) == pytest.approx(float(H.min()), abs=0.06)
+
+
+def test_a_dem_without_a_cell_size_and_needle_slopes_says_so(tmp_path, capsys):
+    # A .npy says nothing of its cell: 1 m is assumed. Hills 100 m high and 600 m apart
+    # at 20 m cells read so have slopes of 80 deg and more (a 2.4 km DEM read so rendered
+    # as needles): the user hears, with the option to give.
+    x = np.arange(32.0)
+    X, Y = np.meshgrid(x, x)
+    np.save(tmp_path / "v.npy", (300.0 + 50.0 * np.sin(X / 5.0) * np.cos(Y / 4.0)).astype(np.float32))
+    for cell, noted in ((None, True), ("20", False)):
+        out = tmp_path / f"v{cell}.toml"
+        rc, stdout, err = _amplify(capsys, tmp_path / "v.npy", "-o", out, "--preset", "strata", "--no-refine",
+                                   *(("--cell-size", cell) if cell else ()))
+        assert rc == 0, err
+        said = [line for line in stdout.splitlines() if "gives no cell size" in line]
+        assert len(said) == noted and (not noted or "--cell-size" in said[0]), stdout

@@ -12,14 +12,16 @@ from arches_render.generators.terrain.preset_ranking import MIN_LANDFORMS, rank_
 from arches_render.generators.terrain.shots import landform_volume
 
 
-def test_the_dems_choice_stays_first_while_it_makes_a_landform_else_all_go_by_volume():
-    assert MIN_LANDFORMS == 1.0
+def test_the_dems_choice_stays_first_while_it_makes_a_landform_a_shot_else_all_go_by_volume():
+    assert MIN_LANDFORMS == 3.0  # one landform for each of the three close shots
     # The choice makes 3 landforms of 1 m: first; the others by volume, nothing last.
     assert rank_order([3.0, 10.0, 50.0, 0.0], [1.0] * 4) == [0, 2, 1, 3]
-    # 7.9 m^3 is under one landform of 2 m (8 m^3): by volume; ties keep the candidates' order.
-    assert rank_order([7.9, 10.0, 10.0, 0.0], [2.0, 1.0, 1.0, 1.0]) == [1, 2, 0, 3]
-    assert rank_order([8.0, 10.0], [2.0, 1.0]) == [0, 1]  # exactly one landform is enough
+    # 23.9 m^3 is under three landforms of 2 m (24 m^3): by volume; ties keep the candidates' order.
+    assert rank_order([23.9, 30.0, 30.0, 0.0], [2.0, 1.0, 1.0, 1.0]) == [1, 2, 0, 3]
+    assert rank_order([24.0, 30.0], [2.0, 1.0]) == [0, 1]  # exactly three landforms are enough
     assert rank_order([0.0, 0.0], [1.0, 1.0]) == [0, 1]
+    # One landform and a third (the river on the Maunga Whau cone) is not a subject.
+    assert rank_order([1.35 * 5.84 ** 3, 1.06e6], [5.84, 10.0]) == [1, 0]
 
 
 def test_the_ranking_line_says_what_each_made_in_the_order_tried():
@@ -27,7 +29,7 @@ def test_the_ranking_line_says_what_each_made_in_the_order_tried():
                         rank_order([0.0, 2e6, 3e4], [10.0, 100.0, 20.0]), ["no tunnel", None, None])
     assert line.index("strata 2e+06 m3") < line.index("river 3e+04 m3") < line.index("karst nothing (no tunnel)")
     assert "2 landforms of 100 m (30 primitives)" in line and "3.75 landforms of 20 m (12 primitives)" in line
-    assert line.endswith("Order: by volume (karst, the DEM's choice, makes under 1 landform)")
+    assert line.endswith("Order: by volume (karst, the DEM's choice, makes under 3 landforms)")
 
 
 def test_buried_tunnels_are_not_seen_from_the_air_but_cave_mouths_are():

@@ -19,9 +19,12 @@ Order
     (:func:`.preset_choice.choose_preset`: sea cliffs on a coast) therefore stays
     first while it makes at least :data:`MIN_LANDFORMS` landforms' worth, ``F^3``
     with ``F`` its landform size (:func:`.preset_choice.landform_scales`): the river
-    undercuts of the NM canyon make 7.4, the sea of the synthetic coast 63. A choice
-    that makes less (the karst lattice of a 200 m Alpine DEM: nothing) is no subject
-    for a shot, and then every preset goes by volume, largest first. The others
+    undercuts of the NM canyon make 7.4-37 (by seed), the sea of the synthetic coast 63,
+    of the Salish and Devil's Slide coasts 90 and 54. A choice that makes less is no
+    subject for the three close shots (the karst lattice of a 200 m Alpine DEM made
+    nothing; the river on the Maunga Whau cone 1.35, undercuts of 6 m on its rim, where
+    karst's lava-tube mouths made 1060: its crater held a lake to the brim and its shots
+    framed grass), and then every preset goes by volume, largest first. The others
     follow by volume either way; ties keep the candidates' order.
 
 The kept preset is then the first in this order whose landforms a close shot can
@@ -43,8 +46,8 @@ from .shots import landform_cells, landform_volume
 __all__ = ["MIN_LANDFORMS", "visible_volume", "rank_order", "ranking_line"]
 
 #: The chosen preset stays first while its visible volume is at least this many cubes of
-#: its landform size (module docstring, "Order").
-MIN_LANDFORMS = 1.0
+#: its landform size (module docstring, "Order"): one a close shot.
+MIN_LANDFORMS = 3.0
 
 
 def visible_volume(result) -> tuple[float, float]:
@@ -124,7 +127,7 @@ def ranking_line(names, volumes, features, primitives, order, why_none=None) -> 
             made = "nothing" + (f" ({why_none[i]})" if why_none and why_none[i] else "")
         parts.append(f"{names[i]} {made}")
     if order[0] == 0:
-        how = f"{names[0]}, the DEM's choice, first (it makes at least {MIN_LANDFORMS:g} landform), then by volume"
+        how = f"{names[0]}, the DEM's choice, first (it makes at least {MIN_LANDFORMS:g} landforms), then by volume"
     else:
-        how = f"by volume ({names[0]}, the DEM's choice, makes under {MIN_LANDFORMS:g} landform)"
+        how = f"by volume ({names[0]}, the DEM's choice, makes under {MIN_LANDFORMS:g} landforms)"
     return f"auto ranked the presets by what they make: {'; '.join(parts)}. Order: {how}"

@@ -49,7 +49,9 @@ Views
 Choice
     The close shots are the best view of each landform in the order of
     ``3-D volume x cover``, then further views of the best landforms (azimuths at
-    least 60 degrees apart) until there are ``count``. After the first, a shot is
+    least 60 degrees apart) until there are ``count``: first among the views that
+    frame their landform in :data:`MIN_COVER` of the frame or more, and only where
+    those are too few, among views that frame less of it. After the first, a shot is
     the best view of a height class no shot has yet (eye 1.7-6 m, drone 20-60 m,
     aerial 150 m: :data:`HEIGHT_CLASSES`) where one scores at least half the view it
     replaces: on the NM canyon DEM the third of three shots at eye height (a slope
@@ -85,6 +87,10 @@ HEIGHT_CLASSES = {"eye": (1.7, 6.0), "drone": (20.0, 60.0), "aerial": (150.0,)}
 #: A view of a height class no shot has yet is preferred when it scores at least this
 #: share of the best view it displaces (:func:`_select`).
 CLASS_SCORE = 0.5
+#: The share of a shot's frame its landform covers, under which a view is taken only where
+#: better ones are too few (issue 34: 3-D landforms in 1 % of every close shot's pixels; an
+#: aerial view of Maunga Whau's crater framed its lava-tube mouths in 0.4 %).
+MIN_COVER = 0.01
 _SPANS = (1.5, 3.0, 6.0, 12.0)
 #: The steepest aim, up or down, in half vertical fields of view: the horizon stays in the
 #: frame, and so does ground below the eye. (With the limit on looking down only, cameras
@@ -543,24 +549,36 @@ def _select(views, order, count, ok=None):
     """Up to ``count`` shots (module docstring, "Choice") from each landform's views
     (best first) in the landforms' ``order``; after the first, only views that ``ok``
     accepts (a landform whose best accepted view frames none of it gives none), and
-    among those the best of a height class no shot has yet, where there is one."""
+    among those the best of a height class no shot has yet, where there is one. Views
+    that frame their landform in :data:`MIN_COVER` of the frame come first; views that
+    frame less of it, but some, only fill up what they leave short of ``count``."""
     shots = []
+    for least in (MIN_COVER, 0.0):
+        _take(views, order, count, ok, shots, least)
+    return shots
+
+
+def _take(views, order, count, ok, shots, least):
+    """:func:`_select`'s rules over the views that cover more than ``least`` of their
+    frame (at least ``least`` where it is not 0), appended to ``shots``."""
+    def covers(v):
+        return v["cover"] > 0 and v["cover"] >= least
 
     def fresh(v, best):
         return (v.get("height_class") not in {x.get("height_class") for x in shots}
-                and v["cover"] > 0 and v["score"] >= CLASS_SCORE * best["score"])
+                and covers(v) and v["score"] >= CLASS_SCORE * best["score"])
 
     for i in order:
         if len(shots) >= count:
             break
-        if not views[i]:
+        if not views[i] or any(x["landform"] == views[i][0]["landform"] for x in shots):
             continue
         if not shots:
             s = views[i][0]
         else:
             accepted = [v for v in views[i] if ok is None or ok(v)]
             s = next((v for v in accepted if fresh(v, accepted[0])), accepted[0] if accepted else None)
-        if s is not None and s["cover"] > 0:
+        if s is not None and covers(s):
             shots.append(s)
     # More views of the best landforms, azimuths at least 60 degrees apart, until there
     # are enough: first of the height classes not yet taken, then of any.
@@ -569,7 +587,7 @@ def _select(views, order, count, ok=None):
             for s in views[i]:
                 if len(shots) >= count:
                     break
-                if any(s is x for x in shots) or s["cover"] <= 0 or (ok is not None and not ok(s)):
+                if any(s is x for x in shots) or not covers(s) or (ok is not None and not ok(s)):
                     continue
                 if new_class_only and not fresh(s, views[i][0]):
                     continue
@@ -578,4 +596,3 @@ def _select(views, order, count, ok=None):
                           default=math.pi)
                 if gap >= math.radians(60):
                     shots.append(s)
-    return shots
