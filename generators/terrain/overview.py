@@ -141,7 +141,10 @@ def frame_camera(heights, extent, features=None, fov=50.0, elevation=10.0, margi
     around = ContinuedRelief(*(context or (H, extent)), sea_level)
     ground = around.heights(qx.ravel(), qy.ravel(), 0.0).reshape(qx.shape)
     aim = math.atan2(target[2] - origin[2], math.hypot(*(target - origin)[:2]))  # about -el
-    rise = max(float(np.max(ground - s * math.tan(min(2.0 * band + aim, 1.5)) - origin[2])), 0.0)
+    # (the top line never below the horizontal: ground kilometres away would lift the camera
+    # without end where a steep aim, under two bands, put it there)
+    top = min(max(2.0 * band + aim, 0.0), 1.5)
+    rise = max(float(np.max(ground - s * math.tan(top) - origin[2])), 0.0)
     origin[2] += rise
     target = target + np.array([0.0, 0.0, rise])
     pitch = max(aim, float(np.max(np.arctan2(ground - origin[2], s))) - band)
