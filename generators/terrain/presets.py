@@ -41,7 +41,10 @@ stay), and the note says so.
              (section 6.3, Fig. 18-20).
 ``strata``   The erosion node ``f - f_D (1 - rho)`` (section 6) over the steep
              faces, with folded and faulted strata ``min(S, cliff / 2)`` apart:
-             layered cliffs with overhangs (Fig. 4, 10).
+             layered cliffs with overhangs (Fig. 4, 10). ``f_D`` blends (sums) its
+             spheres, their energy divided by their typical overlap: as a maximum
+             it dipped between the spheres, and the soft beds receded most at each
+             centre, in rows of round pockets (a caldera's walls read polka-dotted).
 
 Carving energies: see :mod:`.amplification` (``Amplification.carving_arrays``).
 
@@ -64,6 +67,7 @@ from . import hoodoos as hd, karst as ks
 from .accessibility import heightfield_mesh
 from .amplification import MAX_PRIMITIVES, SEA_STEPS, Amplification, NodeTables, StepTimer
 from .banded import slab_mesh
+from .falloff import g as falloff
 from .geology import resistance
 from .river_erosion import river_erosion
 from .sea_erosion import sea_erosion_step
@@ -408,6 +412,16 @@ def _bed_pair(run: Amplification) -> float:
                      4.0 * run.precision))
 
 
+def _median_overlap(points, radius) -> float:
+    """Median over ``points`` of the sum at each of the falloffs (radius ``radius``) of all
+    of them, itself included (1 where no other lies within ``radius``)."""
+    from scipy.spatial import cKDTree
+    pairs = cKDTree(points).query_pairs(radius, output_type="ndarray")
+    share = falloff(np.linalg.norm(points[pairs[:, 0]] - points[pairs[:, 1]], axis=1), radius)
+    n = len(points)
+    return float(np.median(1.0 + np.bincount(pairs[:, 0], share, n) + np.bincount(pairs[:, 1], share, n)))
+
+
 def strata(run: Amplification) -> None:
     """The erosion node over the steep faces of the DEM."""
     H, extent, R, T = run.heights, run.extent, run.R, run.T
@@ -425,9 +439,13 @@ def strata(run: Amplification) -> None:
         if run.fallen_blocks:  # no cliff, no block
             run.timer.step("fallen blocks")
         return
+    # The paper's blend, f_D summed over the spheres, each of energy 2T over their median
+    # overlap (the sum of the falloffs at a sphere's centre): a recess along the soft beds
+    # about as deep as one sphere of 2T carved, without a pocket at every centre.
+    energy = 2.0 * T / _median_overlap(pts, Rd)
     rel = run.tree.file("strata_erosion.npz", lambda p: save_npz(p, a=pts, radius=np.full(len(pts), Rd),
-                                                                  energy=np.full(len(pts), 2.0 * T)))
-    run.tree.add("strata_field", {"type": "skeletal_set", "file": rel, "combine": "max"})
+                                                                  energy=np.full(len(pts), energy)))
+    run.tree.add("strata_field", {"type": "skeletal_set", "file": rel, "combine": "sum"})
     run.tree.add("strata_eroded", {"type": "erosion", "child": "terrain", "field": "strata_field",
                                    "resistance": "geology"})
     run.children = ["strata_eroded"]
