@@ -59,6 +59,7 @@ from arches_render.field.heightmaps import DEMError, read_dem
 
 from .amplify import PRESET_NAMES
 from .fallback import amplify_soft
+from .hydrology import slope
 from .presets import PRESETS
 from .refined_crop import CROP_WIDTH_M, REFINE_ABOVE, REFINE_CELLS, attach_context, refine_crop
 from arches_render.tomlfile import toml_text
@@ -179,8 +180,7 @@ def _checked_heights(args, dem):
 def _median_slope(H, cell) -> float:
     """Median slope of ``H`` (degrees), on at most about a million samples."""
     k = max(1, int(math.sqrt(H.size / 1e6)))
-    gy, gx = np.gradient(np.asarray(H[::k, ::k], np.float64), k * cell)
-    return math.degrees(math.atan(float(np.median(np.hypot(gx, gy)))))
+    return math.degrees(math.atan(float(np.median(slope(H[::k, ::k], k * cell)))))
 
 
 def run(args) -> int:
